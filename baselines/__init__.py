@@ -1,0 +1,1 @@
+"""Baseline alignment methods: analytic coarse alignment, and (later) PID gyrocompass, Kalman and factor-graph alignment."""

@@ -1,0 +1,1 @@
+"""Adaptive Schuler damping network (seed 004)."""

@@ -1,0 +1,164 @@
+"""The Aligner protocol, the AlignmentResult every method returns, and method discovery.
+
+A method is a class with a ``name``, a one-line ``description`` and
+``align(imu, site, vref=None, init=None) -> AlignmentResult``. Methods are found by name in
+the entry-point group ``fusionbench.methods`` (the project's own families are registered there
+in pyproject.toml like any plug-in; the core never imports them), or given as a
+``module:Class`` path, so a user's own aligner runs in ``fusionbench run`` without packaging.
+
+A method never sees truth: it gets the IMU data, the site, an optional velocity reference and
+an optional initial attitude guess.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from . import earth
+from .imudata import IMUData
+
+GROUP = "fusionbench.methods"
+
+
+@dataclass(frozen=True)
+class Site:
+    """Where the alignment happens.
+
+    Parameters
+    ----------
+    lat : float
+        Geodetic latitude, rad.
+    lon : float
+        Longitude, rad.
+    h : float
+        Height above the ellipsoid, m.
+    """
+
+    lat: float
+    lon: float = 0.0
+    h: float = 0.0
+
+    def __post_init__(self):
+        earth.check_latitude(self.lat, "site latitude")
+        if not np.isfinite(self.h) or abs(self.h) > 1e5:
+            raise ValueError(f"site height: expected a height between -100 and 100 km in m, found {self.h}")
+
+    @classmethod
+    def from_degrees(cls, lat_deg, lon_deg=0.0, h=0.0):
+        """Site from latitude and longitude in degrees and height in m."""
+        if not -90.0 <= float(lat_deg) <= 90.0:
+            raise ValueError(f"latitude: expected degrees between -90 and 90, found {lat_deg}")
+        return cls(np.radians(float(lat_deg)), np.radians(float(lon_deg)), float(h))
+
+    @property
+    def g(self) -> float:
+        """Normal gravity at the site, m/s^2."""
+        return float(earth.gravity(self.lat, self.h))
+
+
+@dataclass
+class AlignmentResult:
+    """What an aligner returns.
+
+    Attributes
+    ----------
+    method : str
+        Method name.
+    t : ndarray, shape (M,)
+        Times of the attitude history, s (the last one is the last sample of the data).
+    C_bn : ndarray, shape (R, M, 3, 3)
+        Estimated attitude history (body RFU to ENU) for each of the R recordings.
+    extra : dict
+        Method-specific histories or figures (e.g. ``sigma_phi`` (R, M, 3) rad for filters).
+    """
+
+    method: str
+    t: np.ndarray
+    C_bn: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.t = np.asarray(self.t, dtype=float)
+        self.C_bn = np.asarray(self.C_bn, dtype=float)
+        if self.C_bn.ndim != 4 or self.C_bn.shape[1:] != (self.t.size, 3, 3):
+            raise ValueError(f"AlignmentResult C_bn: expected shape (runs, {self.t.size}, 3, 3), found {self.C_bn.shape}")
+
+    @property
+    def C_bn_final(self):
+        """Attitude at the last sample, (R, 3, 3)."""
+        return self.C_bn[:, -1]
+
+    @property
+    def t_end(self) -> float:
+        return float(self.t[-1])
+
+
+@runtime_checkable
+class Aligner(Protocol):
+    """Protocol of an alignment method (structural: no base class needed).
+
+    ``min_duration_s`` is the shortest recording the method accepts, s.
+    """
+
+    name: str
+    description: str
+    min_duration_s: float
+
+    def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
+        """Align a batch of recordings.
+
+        Parameters
+        ----------
+        imu : IMUData
+            R recordings on one time grid, body frame RFU.
+        site : Site
+            Latitude, longitude, height.
+        vref : ndarray, shape (R, M, 3), optional
+            Reference velocity (ENU, m/s) at the end of each increment interval
+            (``imu.increments()[0]``); None means a stationary base (zero velocity).
+        init : ndarray, shape (R, 3, 3) or (3, 3), optional
+            Initial attitude guess C_bn; None lets the method initialise itself.
+        """
+        ...
+
+
+def available_methods():
+    """Registered methods: ``{name: entry point}`` from the ``fusionbench.methods`` group."""
+    return {ep.name: ep for ep in entry_points(group=GROUP)}
+
+
+def load_method(spec: str, **options):
+    """Instantiate a method by registered name or ``module:Class`` path.
+
+    Raises
+    ------
+    ValueError
+        One line naming the method and what is available.
+    """
+    methods = available_methods()
+    if spec in methods:
+        cls = methods[spec].load()
+    elif ":" in spec:
+        mod, _, attr = spec.partition(":")
+        try:
+            cls = getattr(importlib.import_module(mod), attr)
+        except (ImportError, AttributeError) as exc:
+            raise ValueError(f"method {spec!r}: cannot import ({exc})") from None
+    else:
+        raise ValueError(f"method {spec!r}: expected one of {sorted(methods)} or a module:Class path")
+    obj = cls(**options)
+    if not isinstance(obj, Aligner):
+        raise ValueError(f"method {spec!r}: expected an object with name, description, min_duration_s and align()")
+    return obj
+
+
+def initial_attitude(init, runs):
+    """Broadcast an ``init`` guess to (runs, 3, 3), or None."""
+    if init is None:
+        return None
+    return np.broadcast_to(np.asarray(init, dtype=float), (runs, 3, 3)).copy()

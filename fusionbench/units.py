@@ -1,0 +1,94 @@
+"""Named unit conversions: customary inertial-sensor units to SI and back.
+
+Arrays inside fusionbench are SI (rad, rad/s, m/s^2, s). Sensor specifications are often
+quoted in customary units; multiply by a constant here to get SI, divide to get back:
+
+>>> 0.01 * DEG_PER_H          # gyro bias 0.01 deg/h in rad/s
+4.84813681109536e-08
+>>> to_unit(4.84813681109536e-08, "deg/h")
+0.01
+
+``G0`` (standard gravity, 9.80665 m/s^2) defines the unit "g" and so "ug"; it is a unit, not
+the local gravity (see :func:`fusionbench.earth.gravity` for that).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: Standard gravity, m/s^2: the definition of the unit g.
+G0 = 9.80665
+#: One degree, rad.
+DEG = math.pi / 180.0
+#: One arc minute, rad.
+ARCMIN = DEG / 60.0
+#: One arc second, rad.
+ARCSEC = DEG / 3600.0
+#: One hour, s.
+HOUR = 3600.0
+#: Angular rate 1 deg/h in rad/s.
+DEG_PER_H = DEG / HOUR
+#: Angle random walk 1 deg/sqrt(h) in rad/sqrt(s).
+DEG_PER_SQRT_H = DEG / math.sqrt(HOUR)
+#: Rate random walk 1 deg/h/sqrt(h) in rad/s/sqrt(s).
+DEG_PER_H_SQRT_H = DEG_PER_H / math.sqrt(HOUR)
+#: Specific force 1 g in m/s^2.
+G = G0
+#: Specific force 1 micro-g in m/s^2.
+UG = 1e-6 * G0
+#: Milli-g in m/s^2.
+MG = 1e-3 * G0
+#: Velocity random walk 1 ug/sqrt(Hz) in m/s^2/sqrt(Hz) = m/s/sqrt(s).
+UG_PER_SQRT_HZ = UG
+#: Parts per million, dimensionless.
+PPM = 1e-6
+#: Velocity random walk 1 m/s/sqrt(h) in m/s/sqrt(s).
+M_PER_S_SQRT_H = 1.0 / math.sqrt(HOUR)
+
+#: Unit names accepted in scenario files and :func:`to_si` / :func:`to_unit`.
+UNITS = {
+    "rad": 1.0,
+    "deg": DEG,
+    "arcmin": ARCMIN,
+    "arcsec": ARCSEC,
+    "rad/s": 1.0,
+    "deg/s": DEG,
+    "deg/h": DEG_PER_H,
+    "rad/sqrt(s)": 1.0,
+    "deg/sqrt(h)": DEG_PER_SQRT_H,
+    "deg/h/sqrt(h)": DEG_PER_H_SQRT_H,
+    "m/s^2": 1.0,
+    "g": G0,
+    "mg": MG,
+    "ug": UG,
+    "ug/sqrt(Hz)": UG_PER_SQRT_HZ,
+    "m/s/sqrt(h)": M_PER_S_SQRT_H,
+    "m/s/sqrt(s)": 1.0,
+    "m/s": 1.0,
+    "m": 1.0,
+    "s": 1.0,
+    "h": HOUR,
+    "min": 60.0,
+    "Hz": 1.0,
+    "ppm": PPM,
+    "1": 1.0,
+}
+
+
+def _factor(unit: str) -> float:
+    try:
+        return UNITS[unit]
+    except KeyError:
+        raise ValueError(f"unit: expected one of {sorted(UNITS)}, found {unit!r}") from None
+
+
+def to_si(value, unit: str):
+    """Convert ``value`` given in ``unit`` (a key of :data:`UNITS`) to SI."""
+    return np.asarray(value, dtype=float) * _factor(unit) if np.ndim(value) else float(value) * _factor(unit)
+
+
+def to_unit(value, unit: str):
+    """Convert ``value`` in SI to ``unit`` (a key of :data:`UNITS`)."""
+    return np.asarray(value, dtype=float) / _factor(unit) if np.ndim(value) else float(value) / _factor(unit)
