@@ -148,6 +148,10 @@ class Strapdown:
         error, not motion).
     engine : {"numba", "numpy"}, optional
         Compiled loop (default) or the NumPy reference loop; results agree to rounding.
+    height_fixed : bool, optional
+        Hold the height and zero the vertical velocity (the vertical channel of a free inertial
+        solution diverges with time constant sqrt(R / 2g), about 9.5 min); implied by
+        ``position_fixed``.
 
     Notes
     -----
@@ -155,13 +159,15 @@ class Strapdown:
     therefore ``O(chunk)`` however long the recording.
     """
 
-    def __init__(self, state: NavState, dt: float, position_fixed: bool = False, engine: str = "numba"):
+    def __init__(self, state: NavState, dt: float, position_fixed: bool = False, engine: str = "numba",
+                 height_fixed: bool = False):
         if engine not in ("numba", "numpy"):
             raise ValueError(f"engine: expected 'numba' or 'numpy', found {engine!r}")
         self.engine = engine
         self.state = state.copy()
         self.dt = float(dt)
         self.position_fixed = position_fixed
+        self.height_fixed = height_fixed or position_fixed
         runs = state.C_bn.shape[0]
         self._th_prev = np.zeros((runs, 3))
         self._dv_prev = np.zeros((runs, 3))
@@ -207,7 +213,7 @@ class Strapdown:
         out_p = np.empty((runs, m, 3))
         s = self.state
         args = (s.C_bn, s.v_n, s.lat, s.lon, s.h, self._v_prev, self._th_prev, self._dv_prev,
-                dtheta, dvel, cmd, self.dt, self.position_fixed, record_every, out_C, out_v, out_p)
+                dtheta, dvel, cmd, self.dt, self.position_fixed, self.height_fixed, record_every, out_C, out_v, out_p)
         if self.engine == "numba":
             _integrate_numba(*args)
         else:
@@ -216,7 +222,7 @@ class Strapdown:
 
 
 def _integrate_numpy(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
-                     position_fixed, record_every, out_C, out_v, out_p):
+                     position_fixed, height_fixed, record_every, out_C, out_v, out_p):
     """Reference engine: loop over samples, NumPy over runs. Updates the state arrays in place."""
     n = dtheta.shape[1]
     C_b, dv_b = body_increments(dtheta, dvel, th_prev, dv_prev)
@@ -235,10 +241,12 @@ def _integrate_numpy(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, 
         dv_n = (C @ dv_b[:, k, :, None])[..., 0]
         dv_n = dv_n - 0.5 * _cross(zeta, dv_n)
         v_new = v + dv_n + (g_n - _cross(2.0 * w_ie + w_en, v_mid)) * dt
+        if height_fixed:
+            v_new[:, 2] = 0.0
         C = np.swapaxes(rodrigues(zeta), -1, -2) @ C @ C_b[:, k]
         if not position_fixed:
             vm = 0.5 * (v + v_new)
-            h = h + vm[:, 2] * dt
+            h = h if height_fixed else h + vm[:, 2] * dt
             lat = lat + vm[:, 1] / rmh * dt
             lon = lon + vm[:, 0] / (rnh * np.cos(lat)) * dt
         v_prev, v = v, v_new
@@ -277,7 +285,7 @@ def _rodrigues3(x, y, z, out):
 
 @numba.njit(cache=True)
 def _integrate_numba(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
-                     position_fixed, record_every, out_C, out_v, out_p):
+                     position_fixed, height_fixed, record_every, out_C, out_v, out_p):
     """Compiled engine: the same arithmetic as :func:`_integrate_numpy`, one run at a time."""
     runs, n = dtheta.shape[0], dtheta.shape[1]
     has_cmd = cmd.shape[1] > 0
@@ -332,6 +340,8 @@ def _integrate_numba(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, 
             nE = vE + d0 - (c1 * mU - c2 * mN) * dt
             nN = vN + d1 - (c2 * mE - c0 * mU) * dt
             nU = vU + d2 + (-g - (c0 * mN - c1 * mE)) * dt
+            if height_fixed:
+                nU = 0.0
             # attitude: C <- N^T C B
             _rodrigues3(f0, f1, f2, B)
             _rodrigues3(-z0, -z1, -z2, N)
@@ -342,7 +352,8 @@ def _integrate_numba(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, 
                 for j in range(3):
                     C[i, j] = N[i, 0] * T[0, j] + N[i, 1] * T[1, j] + N[i, 2] * T[2, j]
             if not position_fixed:
-                h = h + 0.5 * (vU + nU) * dt
+                if not height_fixed:
+                    h = h + 0.5 * (vU + nU) * dt
                 lat = lat + 0.5 * (vN + nN) / rmh * dt
                 lon = lon + 0.5 * (vE + nE) / (rnh * np.cos(lat)) * dt
             pE, pN, pU = vE, vN, vU

@@ -1,0 +1,82 @@
+"""Compare a run's metrics.json with committed reference metrics: the accuracy regression check.
+
+A figure regresses when it is worse than the reference beyond the tolerance (improvements pass):
+
+* final error per axis, ``rms`` and ``|mean|``: new > ref * (1 + REL_TOL) + ABS_TOL_ARCMIN;
+* azimuth settling time, mean: new > ref * (1 + REL_TOL) + ABS_TOL_S;
+* a method of the reference missing from the run.
+
+Same scenario, seed and size give identical numbers on one machine; the tolerances absorb
+floating-point differences across platforms and library versions, not behaviour changes.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+REL_TOL = 0.10
+ABS_TOL_ARCMIN = 0.05
+ABS_TOL_S = 5.0
+
+
+def compare(new: dict, ref: dict):
+    """Rows ``(method, figure, reference, new, allowed)`` of every figure that regressed."""
+    bad = []
+    for name, r in ref["methods"].items():
+        n = new["methods"].get(name)
+        if n is None:
+            bad.append((name, "method missing from run", "present", "absent", "present"))
+            continue
+        for ax in "ENU":
+            for stat in ("rms", "mean"):
+                rv = abs(r["final_error_arcmin"][ax][stat])
+                nv = abs(n["final_error_arcmin"][ax][stat])
+                allowed = rv * (1 + REL_TOL) + ABS_TOL_ARCMIN
+                if not nv <= allowed:
+                    bad.append((name, f"final phi{ax} |{stat}| (arcmin)", rv, nv, allowed))
+        rv = r["settling_time_s"]["U"]["mean"]
+        nv = n["settling_time_s"]["U"]["mean"]
+        allowed = rv * (1 + REL_TOL) + ABS_TOL_S
+        if not nv <= allowed:
+            bad.append((name, "settling U mean (s)", rv, nv, allowed))
+    return bad
+
+
+def metrics_files(folder):
+    """metrics.json of ``folder`` itself, or of each scenario sub-folder (a ``run all`` output)."""
+    folder = Path(folder)
+    if (folder / "metrics.json").is_file():
+        return [folder / "metrics.json"]
+    found = sorted(folder.glob("*/metrics.json"))
+    if not found:
+        raise ValueError(f"{folder}: no metrics.json in it or in its sub-folders")
+    return found
+
+
+def load_json(path, what):
+    try:
+        with open(path) as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: {what} not found") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: {what} is not valid JSON ({exc})") from None
+
+
+def reference_for(reference, scenario):
+    """The reference file for ``scenario`` under ``reference`` (a folder of ``<scenario>.json`` or one file)."""
+    reference = Path(reference)
+    path = reference / f"{scenario}.json" if reference.is_dir() else reference
+    ref = load_json(path, "reference metrics")
+    if ref.get("scenario") != scenario:
+        raise ValueError(f"{path}: reference is for scenario {ref.get('scenario')!r}, the run is {scenario!r}")
+    return ref, path
+
+
+def format_table(rows):
+    lines = [f"{'method':<14} {'figure':<30} {'reference':>10} {'now':>10} {'allowed':>10}"]
+    for m, fig, rv, nv, al in rows:
+        fmt = (lambda v: f"{v:10.3f}") if isinstance(rv, float) else (lambda v: f"{v!s:>10}")
+        lines.append(f"{m:<14} {fig:<30} {fmt(rv)} {fmt(nv)} {fmt(al)}")
+    return "\n".join(lines)

@@ -1,0 +1,130 @@
+"""Command line: ``fusionbench list / run / align / check`` (see CONTRACT.md).
+
+Bad input ends with one line ``fusionbench: error: ...`` naming the file or field, exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__, attitude, scenarios
+from .aligner import Site, available_methods, load_method
+
+
+def _parser():
+    p = argparse.ArgumentParser(prog="fusionbench", description="Benchmark of INS initial-alignment methods "
+                                "on a shared, exact IMU simulator.")
+    p.add_argument("--version", action="version", version=f"fusionbench {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="built-in scenarios and alignment methods, one per line")
+    a = sub.add_parser("align", help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
+    a.add_argument("imu_file")
+    a.add_argument("--lat", type=float, required=True, help="latitude, deg")
+    a.add_argument("--lon", type=float, default=0.0, help="longitude, deg")
+    a.add_argument("--height", type=float, default=0.0, help="height, m")
+    a.add_argument("--method", default="coarse", help="method name or module:Class (default coarse)")
+    a.add_argument("--json", action="store_true", help="print one JSON object")
+    r = sub.add_parser("run", help="Monte Carlo run of a scenario (a built-in name, 'all', or a .toml file)")
+    r.add_argument("scenario")
+    r.add_argument("--methods", help="comma-separated method names (default: the scenario's)")
+    r.add_argument("--runs", type=int, help="Monte Carlo runs (default: the scenario's)")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--quick", action="store_true", help="reduced size for CI")
+    r.add_argument("--out", default="report", help="output folder (default ./report)")
+    r.add_argument("--jobs", type=int, default=1, help="parallel workers (joblib); -1 for all cores")
+    c = sub.add_parser("check", help="compare DIR/metrics.json with the committed reference metrics")
+    c.add_argument("dir")
+    c.add_argument("--reference", default="benchmarks/reference", help="reference folder or file")
+    return p
+
+
+def _cmd_list(args):
+    print("scenarios:")
+    for name in scenarios.builtin_names():
+        print(f"  {name:<28} {scenarios.get(name).description}")
+    print("methods:")
+    for name, ep in sorted(available_methods().items()):
+        print(f"  {name:<28} {getattr(ep.load(), 'description', '')}")
+    return 0
+
+
+def _cmd_align(args):
+    from .io import IMUFileError, read_imu
+
+    method = load_method(args.method)
+    site = Site.from_degrees(args.lat, args.lon, args.height)
+    imu, _ = read_imu(args.imu_file)
+    if imu.duration < method.min_duration_s:
+        raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
+                           f"it needs at least {method.min_duration_s:g} s")
+    res = method.align(imu, site)
+    C = res.C_bn_final[0]
+    pitch, roll, yaw = np.degrees(attitude.dcm_to_euler(C))
+    out = {"method": method.name, "t_end": res.t_end, "C_bn": C.tolist(), "pitch_deg": float(pitch),
+           "roll_deg": float(roll), "yaw_deg": float(yaw), "heading_deg": float(np.degrees(attitude.heading(np.radians(yaw))))}
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"method {out['method']}, t_end {out['t_end']:.3f} s")
+        print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
+    return 0
+
+
+def _cmd_run(args):
+    from .report import write_index, write_scenario_report
+    from .runner import run_scenario
+
+    names = scenarios.builtin_names() if args.scenario == "all" else [args.scenario]
+    scns = [scenarios.get(n) for n in names]  # validate every scenario before running any
+    methods = args.methods.split(",") if args.methods else None
+    out_dir = Path(args.out)
+    outs = []
+    for scn in scns:
+        res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick, n_jobs=args.jobs)
+        folder = out_dir / scn.name if args.scenario == "all" else out_dir
+        path = write_scenario_report(res, folder)
+        outs.append(res)
+        print(f"{scn.name}: {path}")
+    if args.scenario == "all":
+        print(f"index: {write_index(out_dir, outs)}")
+    return 0
+
+
+def _cmd_check(args):
+    from .check import compare, format_table, load_json, metrics_files, reference_for
+
+    failed = False
+    for path in metrics_files(args.dir):
+        new = load_json(path, "metrics")
+        ref, ref_path = reference_for(args.reference, new["scenario"])
+        note = ""
+        if (ref.get("quick"), ref.get("runs"), ref.get("seed")) != (new.get("quick"), new.get("runs"), new.get("seed")):
+            note = (f" (note: reference made with quick={ref.get('quick')}, runs={ref.get('runs')}, seed={ref.get('seed')};"
+                    f" this run quick={new.get('quick')}, runs={new.get('runs')}, seed={new.get('seed')})")
+        bad = compare(new, ref)
+        if bad:
+            failed = True
+            print(f"{new['scenario']}: REGRESSED against {ref_path}{note}")
+            print(format_table(bad))
+        else:
+            print(f"{new['scenario']}: ok against {ref_path}{note}")
+    return 1 if failed else 0
+
+
+def main(argv=None):
+    args = _parser().parse_args(argv)
+    try:
+        return {"list": _cmd_list, "align": _cmd_align, "run": _cmd_run, "check": _cmd_check}[args.command](args)
+    except (ValueError, OSError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"fusionbench: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

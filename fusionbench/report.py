@@ -1,0 +1,127 @@
+"""report.md and its figures (matplotlib, Agg backend) for a scenario run, and an index for several.
+
+Each scenario folder holds ``metrics.json``, ``report.md`` and PNG figures: the misalignment
+(E, N, U) against time for every method, Monte Carlo mean and the 1-sigma band, with the
+theoretical limits drawn as dashed lines.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from . import units  # noqa: E402
+from .io import atomic_open  # noqa: E402
+from .runner import write_metrics  # noqa: E402
+
+
+def _save_png(fig, path):
+    fd, tmp = tempfile.mkstemp(suffix=".png", dir=os.path.dirname(path) or ".")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def error_figure(out, path):
+    """Misalignment vs time, one panel per axis (arcmin), every method, limits dashed."""
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    lim = out.limits / units.ARCMIN
+    for name, oc in out.outcomes.items():
+        phi = oc.phi / units.ARCMIN
+        mean, std = phi.mean(axis=0), phi.std(axis=0)
+        for i, ax in enumerate(axes):
+            (line,) = ax.plot(oc.t, mean[:, i], label=name)
+            ax.fill_between(oc.t, mean[:, i] - std[:, i], mean[:, i] + std[:, i], color=line.get_color(), alpha=0.2)
+    for i, ax in enumerate(axes):
+        ax.axhline(lim[i], color="k", ls="--", lw=1, label="limit" if i == 0 else None)
+        ax.set_ylabel(f"phi{'ENU'[i]} (arcmin)")
+        ax.grid(alpha=0.3)
+        # zoom on the settled part: the last 70 % of the record
+        vals = np.concatenate([oc.phi[:, oc.t >= oc.t[0] + 0.3 * (oc.t[-1] - oc.t[0]), i].ravel() / units.ARCMIN
+                               for oc in out.outcomes.values()] + [[lim[i]]])
+        lo, hi = np.percentile(vals, [1, 99])
+        pad = max(0.2 * (hi - lo), 0.05)
+        ax.set_ylim(lo - pad, hi + pad)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(f"{out.metrics['scenario']}: misalignment, Monte Carlo mean and 1-sigma ({out.metrics['runs']} runs)")
+    fig.tight_layout()
+    _save_png(fig, path)
+
+
+def _table(m):
+    lim = m["limits_arcmin"]
+    rows = ["| method | phiE mean (std) | phiN mean (std) | phiU mean (std) | phiU rms | settling U (s, band "
+            f"{next(iter(m['methods'].values()))['settling_time_s']['band_arcmin'] if m['methods'] else ''} arcmin) "
+            "| wall (s) |", "|---|---|---|---|---|---|---|",
+            f"| *theoretical limit* | {lim['E']:.3f} | {lim['N']:.3f} | {lim['U']:.3f} | | | |"]
+    for name, r in m["methods"].items():
+        f = r["final_error_arcmin"]
+        s = r["settling_time_s"]["U"]
+        rows.append(f"| {name} | {f['E']['mean']:.3f} ({f['E']['std']:.3f}) | {f['N']['mean']:.3f} ({f['N']['std']:.3f}) "
+                    f"| {f['U']['mean']:.3f} ({f['U']['std']:.3f}) | {f['U']['rms']:.3f} | {s['mean']:.1f} "
+                    f"| {r['wall_s']:.2f} |")
+    return "\n".join(rows)
+
+
+def write_scenario_report(out, folder):
+    """Write metrics.json, report.md and the figures of one run into ``folder``; returns report path."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    m = out.metrics
+    scn = out.scenario
+    fig_name = "errors.png"
+    error_figure(out, folder / fig_name)
+    methods_desc = "\n".join(f"- `{n}`: {oc.description}" for n, oc in out.outcomes.items())
+    text = f"""# {m['scenario']}
+
+{scn.description}
+
+Runs: {m['runs']} (seed {m['seed']}{', quick size' if m['quick'] else ''}), duration {m['duration_s']:.0f} s at
+{scn.rate_hz:g} Hz, latitude {np.degrees(scn.site.lat):.3f} deg, IMU `{scn.imu_spec.name}`
+({scn.imu_spec.description}).
+
+Final misalignment at the last sample, arcmin (mean and standard deviation over runs). The limit is what
+any stationary alignment reaches with this IMU's constant biases: level = accelerometer bias / g,
+azimuth = -east gyro bias / (earth rate cos L) + tan L east accelerometer bias / g.
+
+{_table(m)}
+
+Methods:
+{methods_desc}
+
+![misalignment vs time]({fig_name})
+
+Reproduce: `fusionbench run {m['scenario']} --runs {m['runs']} --seed {m['seed']}{' --quick' if m['quick'] else ''}`
+"""
+    write_metrics(folder / "metrics.json", m)
+    with atomic_open(folder / "report.md") as fh:
+        fh.write(text)
+    return folder / "report.md"
+
+
+def write_index(folder, outs):
+    """An index.md over several scenario runs in sub-folders of ``folder``."""
+    folder = Path(folder)
+    lines = ["# fusionbench report", "", "| scenario | runs | methods | best final phiU rms (arcmin) | limit U (arcmin) |",
+             "|---|---|---|---|---|"]
+    for out in outs:
+        m = out.metrics
+        best = min(m["methods"].items(), key=lambda kv: kv[1]["final_error_arcmin"]["U"]["rms"])
+        lines.append(f"| [{m['scenario']}]({m['scenario']}/report.md) | {m['runs']} | {', '.join(m['methods'])} "
+                     f"| {best[1]['final_error_arcmin']['U']['rms']:.3f} ({best[0]}) | {m['limits_arcmin']['U']:.3f} |")
+    with atomic_open(folder / "index.md") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return folder / "index.md"

@@ -1,0 +1,173 @@
+"""Monte Carlo runner: every method on identical simulated data, errors against truth and limits.
+
+For a scenario the runner simulates runs in batches (the IMU errors of run k depend only on the
+seed and k, never on the batch: see :mod:`fusionbench.imu`), gives each batch to every method,
+and keeps the misalignment history of each run against truth. The figures of ``metrics.json``
+(CONTRACT) come from these histories; the histories feed the report's figures.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from joblib import Parallel, delayed
+from tqdm import tqdm
+
+from . import imu as imu_mod
+from . import metrics, units
+from .aligner import load_method
+from .io import atomic_open
+
+#: Longest history kept per method for figures (points).
+HISTORY_POINTS = 400
+#: Memory budget of one batch of IMU samples, bytes.
+BATCH_BYTES = 200e6
+
+
+@dataclass
+class MethodOutcome:
+    """One method's results over all runs: history times t (M,) s, misalignment phi (R, M, 3) rad."""
+
+    name: str
+    description: str
+    t: np.ndarray
+    phi: np.ndarray
+    wall_s: float
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class RunOutput:
+    """A finished scenario run: its metrics (the metrics.json mapping) and the methods' histories."""
+
+    scenario: object
+    metrics: dict
+    outcomes: dict
+    limits: np.ndarray
+
+
+def _decimate(t, phi):
+    if t.size <= HISTORY_POINTS:
+        return t, phi
+    idx = np.unique(np.linspace(0, t.size - 1, HISTORY_POINTS).round().astype(int))
+    return t[idx], phi[:, idx]
+
+
+def _run_batch(scn, method_names, first_run, runs, seed, duration):
+    """Simulate runs first_run..first_run+runs-1 and align them with every method."""
+    traj = scn.trajectory(duration)
+    data = imu_mod.simulate(traj, scn.imu_spec, scn.dt, runs=runs, seed=seed, first_run=first_run)
+    t_inc, _, _ = data.increments()
+    vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
+    init = scn.initial_guess(traj.truth([data.t0]).C_bn[0])
+    out = {}
+    for name in method_names:
+        method = load_method(name)
+        t0 = time.perf_counter()
+        res = method.align(data, scn.site, vref=vref, init=init)
+        wall = time.perf_counter() - t0
+        phi = metrics.misalignment_history(res.C_bn, traj.truth(res.t).C_bn)
+        t_h, phi_h = _decimate(res.t, phi)
+        out[name] = (method.description, t_h, phi_h, phi[:, -1], wall, res.t)
+    return out
+
+
+def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None):
+    """Run a scenario's Monte Carlo and compute its metrics.
+
+    Parameters
+    ----------
+    scn : fusionbench.scenarios.Scenario
+        The scenario.
+    methods : sequence of str, optional
+        Method names or ``module:Class`` paths (default: the scenario's list).
+    runs : int, optional
+        Monte Carlo runs (default: the scenario's full or quick size).
+    seed : int
+        Seed; run k of seed s gives the same numbers whatever the batch size or worker count.
+    quick : bool
+        Use the scenario's reduced duration and run count.
+    n_jobs : int
+        Parallel workers over batches (joblib); 1 runs in this process.
+    progress : bool, optional
+        Show a tqdm bar over runs (default: only when stderr is a terminal).
+    batch_size : int, optional
+        Runs per batch (default: as many as fit in about 200 MB of IMU samples).
+
+    Returns
+    -------
+    RunOutput
+    """
+    methods = list(methods or scn.methods)
+    for m in methods:  # fail early, with the method's own message
+        load_method(m)
+    duration, default_runs = scn.sized(quick)
+    runs = int(runs or default_runs)
+    if runs < 1:
+        raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
+    n_samples = int(round(duration / scn.dt))
+    if batch_size is None:
+        batch_size = int(max(1, min(runs, BATCH_BYTES // (n_samples * 48))))
+    starts = list(range(0, runs, batch_size))
+    jobs = [(k0, min(batch_size, runs - k0)) for k0 in starts]
+    show = sys.stderr.isatty() if progress is None else progress
+    bar = tqdm(total=runs, desc=scn.name, unit="run", disable=not show)
+    if n_jobs == 1:
+        results = []
+        for k0, n in jobs:
+            results.append(_run_batch(scn, methods, k0, n, seed, duration))
+            bar.update(n)
+    else:
+        results = Parallel(n_jobs=n_jobs)(delayed(_run_batch)(scn, methods, k0, n, seed, duration) for k0, n in jobs)
+        bar.update(runs)
+    bar.close()
+
+    traj = scn.trajectory(duration)
+    C_end = traj.truth([duration]).C_bn[0]
+    limits = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_end,
+                                        scn.site.lat, scn.site.h)
+    outcomes = {}
+    for name in methods:
+        parts = [r[name] for r in results]
+        desc, t_h = parts[0][0], parts[0][1]
+        phi_h = np.concatenate([p[2] for p in parts])
+        phi_end = np.concatenate([p[3] for p in parts])
+        outcomes[name] = MethodOutcome(name, desc, t_h, phi_h, sum(p[4] for p in parts),
+                                       {"phi_end": phi_end})
+    return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits)
+
+
+def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
+    band = scn.settling_band_arcmin
+    out = {
+        "scenario": scn.name,
+        "runs": runs,
+        "seed": int(seed),
+        "duration_s": float(duration),
+        "quick": bool(quick),
+        "limits_arcmin": {ax: float(limits[i] / units.ARCMIN) for i, ax in enumerate("ENU")},
+        "methods": {},
+    }
+    for name, oc in outcomes.items():
+        phi_end = oc.extra["phi_end"] / units.ARCMIN
+        phi_u = oc.phi[..., 2] / units.ARCMIN
+        settle = metrics.settling_time(oc.t, phi_u, band)
+        out["methods"][name] = {
+            "final_error_arcmin": {ax: metrics.stats(phi_end[:, i]) for i, ax in enumerate("ENU")},
+            "settling_time_s": {"U": metrics.stats(settle), "band_arcmin": band},
+            "wall_s": float(oc.wall_s),
+            "final_minus_limit_arcmin": {ax: float(np.mean(phi_end[:, i]) - limits[i] / units.ARCMIN)
+                                         for i, ax in enumerate("ENU")},
+        }
+    return out
+
+
+def write_metrics(path, metrics_dict):
+    """Write metrics.json atomically (indent 1, keys in insertion order)."""
+    with atomic_open(path) as fh:
+        json.dump(metrics_dict, fh, indent=1)
+        fh.write("\n")

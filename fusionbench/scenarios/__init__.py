@@ -1,0 +1,290 @@
+"""Scenarios as data: TOML files describing site, motion, IMU, reference, initial guess and run sizes.
+
+Built-in scenarios ship in this folder (``*.toml``); a user's scenario is any TOML file of the
+same form. Every file is validated on load; an error names the file and the field.
+
+Format (angles in degrees, times in s, sensor figures in the customary units named in the key)::
+
+    name = "static-34n"
+    description = "one line"
+    duration_s = 300.0          # full size
+    rate_hz = 100.0
+    runs = 20                   # default Monte Carlo size
+    methods = ["coarse"]        # default methods
+    [quick]                     # reduced sizes for CI (--quick)
+    duration_s = 120.0
+    runs = 3
+    [site]
+    lat_deg = 34.0
+    lon_deg = 108.0
+    height_m = 450.0
+    [attitude]                  # true attitude: mean Euler angles and sway
+    pitch_deg = 0.0
+    roll_deg = 0.0
+    heading_deg = 30.0          # clockwise from north
+    sway_amplitude_deg = [0, 0, 0]   # [pitch, roll, yaw]
+    sway_frequency_hz = [0, 0, 0]
+    sway_phase_deg = [0, 0, 0]
+    [motion]                    # optional translation
+    start_s = 0.0
+    segments = [{accel_mps2 = [0.98, 0, 0], duration_s = 100.0}]
+    disturbance_rms_mps = [0.05, 0.05, 0.05]
+    disturbance_band_hz = [0.1, 2.0]
+    [imu]
+    preset = "seed000"          # a key of fusionbench.imu.PRESETS
+    random = true               # false: keep only the deterministic errors (biases, scale factors)
+    gyro_bias_dph = [0.01, 0.01, 0.01]    # optional overrides of the preset
+    accel_bias_ug = [30, 30, 30]
+    arw_dpsh = 0.005
+    vrw_ug_rthz = 6.0
+    schedule = [{start_s = 200, end_s = 400, factor = 100}]
+    [vref]
+    sigma_mps = 0.0
+    schedule = []
+    [init]
+    misalignment_deg = [3, 3, 180]   # initial guess exp(-[phi x]) C_true; absent: method initialises
+    [metrics]
+    settling_band_arcmin = 1.0
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .. import attitude, imu, trajectory, units
+from ..aligner import Site
+
+_TOP = {"name", "description", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
+        "motion", "imu", "vref", "init", "metrics"}
+_SECTIONS = {
+    "quick": {"duration_s", "runs"},
+    "site": {"lat_deg", "lon_deg", "height_m"},
+    "attitude": {"pitch_deg", "roll_deg", "heading_deg", "sway_amplitude_deg", "sway_frequency_hz",
+                 "sway_phase_deg"},
+    "motion": {"start_s", "segments", "disturbance_rms_mps", "disturbance_band_hz", "disturbance_seed"},
+    "imu": {"preset", "random", "gyro_bias_dph", "accel_bias_ug", "arw_dpsh", "vrw_ug_rthz",
+            "gyro_bias_sigma_dph", "accel_bias_sigma_ug", "gyro_scale_ppm", "accel_scale_ppm", "schedule"},
+    "vref": {"sigma_mps", "schedule"},
+    "init": {"misalignment_deg"},
+    "metrics": {"settling_band_arcmin"},
+}
+
+
+class ScenarioError(ValueError):
+    """A scenario file or field is invalid; the message is one line naming the file and field."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario. Build its parts with the methods below (all SI)."""
+
+    name: str
+    description: str
+    duration_s: float
+    rate_hz: float
+    runs: int
+    methods: tuple
+    quick_duration_s: float
+    quick_runs: int
+    site: Site
+    euler_mean: tuple
+    sway_amplitude: tuple
+    sway_frequency: tuple
+    sway_phase: tuple
+    translation: trajectory.Translation
+    imu_spec: imu.IMUSpec
+    vref_spec: imu.VelocityReferenceSpec
+    init_misalignment: tuple | None
+    settling_band_arcmin: float
+    source: str = ""
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    def sized(self, quick: bool):
+        """(duration_s, runs) for a full or a quick run."""
+        return (self.quick_duration_s, self.quick_runs) if quick else (self.duration_s, self.runs)
+
+    def trajectory(self, duration=None) -> trajectory.Trajectory:
+        """The true motion (:class:`fusionbench.trajectory.Trajectory`)."""
+        sway = trajectory.EulerSway(self.euler_mean, self.sway_amplitude, self.sway_frequency, self.sway_phase)
+        return trajectory.Trajectory(self.site.lat, self.site.lon, self.site.h, sway, self.translation,
+                                     self.duration_s if duration is None else duration)
+
+    def initial_guess(self, C_bn_true):
+        """Initial attitude guess (3, 3) from the prescribed misalignment, or None."""
+        if self.init_misalignment is None:
+            return None
+        return attitude.apply_misalignment(C_bn_true, np.radians(self.init_misalignment))
+
+
+def _where(src, key):
+    return f"{src}: field '{key}'"
+
+
+def _num(d, key, src, default=None, lo=-np.inf, hi=np.inf):
+    if key not in d:
+        if default is None:
+            raise ScenarioError(f"{_where(src, key)} is missing")
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or not lo <= v <= hi:
+        raise ScenarioError(f"{_where(src, key)}: expected a number in [{lo}, {hi}], found {v!r}")
+    return float(v)
+
+
+def _vec(d, key, src, default=(0.0, 0.0, 0.0), n=3):
+    if key not in d:
+        return tuple(default)
+    v = d[key]
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        v = [v] * n
+    if not isinstance(v, list) or len(v) != n or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v):
+        raise ScenarioError(f"{_where(src, key)}: expected {n} numbers, found {v!r}")
+    return tuple(float(x) for x in v)
+
+
+def _schedules(items, src, key):
+    if not isinstance(items, list):
+        raise ScenarioError(f"{_where(src, key)}: expected a list of tables, found {items!r}")
+    out = []
+    for i, it in enumerate(items):
+        where = f"{key}[{i}]"
+        if not isinstance(it, dict) or set(it) - {"start_s", "end_s", "factor", "sensors"}:
+            raise ScenarioError(f"{_where(src, where)}: expected start_s, end_s, factor [, sensors], found {it!r}")
+        start = _num(it, "start_s", f"{src} {where}", lo=0)
+        end = _num(it, "end_s", f"{src} {where}", lo=start)
+        factor = _num(it, "factor", f"{src} {where}", lo=0)
+        sensors = tuple(it.get("sensors", ("gyro", "accel")))
+        out.append(imu.NoiseSchedule(start, end, factor, sensors))
+    return tuple(out)
+
+
+def _imu_spec(d, src):
+    preset = d.get("preset", "navigation")
+    if preset not in imu.PRESETS:
+        raise ScenarioError(f"{_where(src, 'imu.preset')}: expected one of {sorted(imu.PRESETS)}, found {preset!r}")
+    spec = imu.PRESETS[preset]
+    g, a = spec.gyro, spec.accel
+    s = f"{src} [imu]"
+    if "gyro_bias_dph" in d:
+        g = replace(g, bias=np.multiply(_vec(d, "gyro_bias_dph", s), units.DEG_PER_H))
+    if "gyro_bias_sigma_dph" in d:
+        g = replace(g, bias_sigma=np.multiply(_vec(d, "gyro_bias_sigma_dph", s), units.DEG_PER_H))
+    if "arw_dpsh" in d:
+        g = replace(g, white=np.multiply(_vec(d, "arw_dpsh", s), units.DEG_PER_SQRT_H))
+    if "gyro_scale_ppm" in d:
+        g = replace(g, scale=np.multiply(_vec(d, "gyro_scale_ppm", s), units.PPM))
+    if "accel_bias_ug" in d:
+        a = replace(a, bias=np.multiply(_vec(d, "accel_bias_ug", s), units.UG))
+    if "accel_bias_sigma_ug" in d:
+        a = replace(a, bias_sigma=np.multiply(_vec(d, "accel_bias_sigma_ug", s), units.UG))
+    if "vrw_ug_rthz" in d:
+        a = replace(a, white=np.multiply(_vec(d, "vrw_ug_rthz", s), units.UG_PER_SQRT_HZ))
+    if "accel_scale_ppm" in d:
+        a = replace(a, scale=np.multiply(_vec(d, "accel_scale_ppm", s), units.PPM))
+    spec = replace(spec, gyro=g, accel=a, schedules=_schedules(d.get("schedule", []), src, "imu.schedule"))
+    random = d.get("random", True)
+    if not isinstance(random, bool):
+        raise ScenarioError(f"{_where(src, 'imu.random')}: expected true or false, found {random!r}")
+    return spec if random else spec.noise_free()
+
+
+def parse(data: dict, src: str = "<scenario>") -> Scenario:
+    """Validate a scenario mapping (as read from TOML) and build a :class:`Scenario`."""
+    unknown = set(data) - _TOP
+    if unknown:
+        raise ScenarioError(f"{_where(src, sorted(unknown)[0])}: unknown (expected one of {sorted(_TOP)})")
+    for sec, keys in _SECTIONS.items():
+        if sec in data:
+            if not isinstance(data[sec], dict):
+                raise ScenarioError(f"{_where(src, sec)}: expected a table, found {data[sec]!r}")
+            bad = set(data[sec]) - keys
+            if bad:
+                raise ScenarioError(f"{_where(src, sec + '.' + sorted(bad)[0])}: unknown (expected one of {sorted(keys)})")
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise ScenarioError(f"{_where(src, 'name')}: expected a non-empty string, found {name!r}")
+    duration = _num(data, "duration_s", src, lo=1.0, hi=10 * 86400)
+    rate = _num(data, "rate_hz", src, lo=1.0, hi=10000.0)
+    runs = int(_num(data, "runs", src, default=10, lo=1, hi=100000))
+    methods = data.get("methods", ["coarse"])
+    if not isinstance(methods, list) or not all(isinstance(m, str) for m in methods):
+        raise ScenarioError(f"{_where(src, 'methods')}: expected a list of method names, found {methods!r}")
+    quick = data.get("quick", {})
+    q_dur = _num(quick, "duration_s", f"{src} [quick]", default=min(duration, 120.0), lo=1.0, hi=duration)
+    q_runs = int(_num(quick, "runs", f"{src} [quick]", default=min(runs, 3), lo=1, hi=runs))
+    site_d = data.get("site", {})
+    lat = _num(site_d, "lat_deg", f"{src} [site]", lo=-90, hi=90)
+    site = Site.from_degrees(lat, _num(site_d, "lon_deg", f"{src} [site]", 0.0, -360, 360),
+                             _num(site_d, "height_m", f"{src} [site]", 0.0, -1e4, 1e5))
+    at = data.get("attitude", {})
+    s = f"{src} [attitude]"
+    mean = (np.radians(_num(at, "pitch_deg", s, 0.0, -90, 90)), np.radians(_num(at, "roll_deg", s, 0.0, -180, 180)),
+            -np.radians(_num(at, "heading_deg", s, 0.0, -360, 360)))
+    amp = tuple(np.radians(_vec(at, "sway_amplitude_deg", s)))
+    freq = _vec(at, "sway_frequency_hz", s)
+    if min(freq) < 0 or max(freq) > rate / 4:
+        raise ScenarioError(f"{_where(src, 'attitude.sway_frequency_hz')}: expected values in [0, rate_hz/4], found {freq}")
+    phase = tuple(np.radians(_vec(at, "sway_phase_deg", s)))
+    mo = data.get("motion", {})
+    s = f"{src} [motion]"
+    segs = []
+    for i, it in enumerate(mo.get("segments", [])):
+        if not isinstance(it, dict) or set(it) != {"accel_mps2", "duration_s"}:
+            raise ScenarioError(f"{_where(src, f'motion.segments[{i}]')}: expected accel_mps2 and duration_s, found {it!r}")
+        segs.append(trajectory.Segment(_vec(it, "accel_mps2", s), _num(it, "duration_s", s, lo=0.0)))
+    dist = None
+    if "disturbance_rms_mps" in mo:
+        band = _vec(mo, "disturbance_band_hz", s, (0.1, 2.0), n=2)
+        if not 0 < band[0] < band[1] <= rate / 4:
+            raise ScenarioError(f"{_where(src, 'motion.disturbance_band_hz')}: expected 0 < low < high <= rate_hz/4, found {band}")
+        dist = trajectory.VelocityDisturbance(_vec(mo, "disturbance_rms_mps", s), band,
+                                              seed=int(_num(mo, "disturbance_seed", s, 0.0, 0, 2**31)))
+    translation = trajectory.Translation(segments=tuple(segs), start=_num(mo, "start_s", s, 0.0, 0.0), disturbance=dist)
+    spec = _imu_spec(data.get("imu", {}), src)
+    vr = data.get("vref", {})
+    vspec = imu.VelocityReferenceSpec(_vec(vr, "sigma_mps", f"{src} [vref]"),
+                                      _schedules(vr.get("schedule", []), src, "vref.schedule"))
+    init = data.get("init", {})
+    mis = _vec(init, "misalignment_deg", f"{src} [init]") if "misalignment_deg" in init else None
+    band = _num(data.get("metrics", {}), "settling_band_arcmin", f"{src} [metrics]", 1.0, 1e-6, 1e4)
+    return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
+                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, src, data)
+
+
+def load(path) -> Scenario:
+    """Load and validate a scenario from a TOML file path."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ScenarioError(f"{path}: no such scenario file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML ({exc})") from None
+    return parse(data, str(path))
+
+
+def builtin_names():
+    """Names of the built-in scenarios, sorted."""
+    return sorted(p.name[:-5] for p in resources.files(__name__).iterdir() if p.name.endswith(".toml"))
+
+
+def get(name_or_path) -> Scenario:
+    """A built-in scenario by name, or a scenario file by path."""
+    if name_or_path in builtin_names():
+        ref = resources.files(__name__) / f"{name_or_path}.toml"
+        return parse(tomllib.loads(ref.read_text()), f"{name_or_path}.toml")
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        return load(p)
+    raise ScenarioError(f"scenario {name_or_path!r}: expected a built-in name ({', '.join(builtin_names())}) or a .toml file")

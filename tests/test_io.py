@@ -1,0 +1,366 @@
+"""Tests of fusionbench.io: writer/reader round trips, the PSINS fixture, bad files, atomic writes."""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fusionbench.io as fio
+from fusionbench.attitude import dcm_to_euler
+from fusionbench.imudata import IMUData
+from fusionbench.io import IMUFileError, read_imu, write_csv, write_npz, write_psins
+from fusionbench.units import ARCSEC, DEG
+
+DATA = Path(__file__).parent / "data"
+HEADER = "t,gx,gy,gz,ax,ay,az"
+
+
+def _rate_imu(n=200, dt=0.01, runs=1, seed=0):
+    rng = np.random.default_rng(seed)
+    t = 3.0 + dt * np.arange(n)
+    gyro = 1e-3 * rng.standard_normal((runs, n, 3)) + np.array([1e-5, 5e-5, 3e-5])
+    accel = 1e-2 * rng.standard_normal((runs, n, 3)) + np.array([0.1, -0.2, 9.79])
+    return IMUData(t, gyro, accel, kind="rate")
+
+
+def _incr_imu(n=500, dt=0.02, runs=2, seed=1):
+    r = _rate_imu(n, dt, runs, seed)
+    return IMUData(r.t, r.gyro * dt, r.accel * dt, kind="increment")
+
+
+def _csv(tmp_path, rows, name="data.csv", header=HEADER):
+    p = tmp_path / name
+    p.write_text(header + "\n" + "\n".join(",".join(str(v) for v in r) for r in rows) + "\n")
+    return p
+
+
+def _good_rows(n=10, dt=0.1):
+    return [[k * dt, 1e-5, 2e-5, 3e-5, 0.1, 0.2, 9.8] for k in range(n)]
+
+
+def _assert_error(path, words, **kw):
+    with pytest.raises(IMUFileError) as ei:
+        read_imu(path, **kw)
+    msg = str(ei.value)
+    assert Path(path).name in msg, msg
+    assert "\n" not in msg, msg
+    assert any(w in msg.lower() for w in words), msg
+    return msg
+
+
+# ---------------------------------------------------------------- round trips
+
+def test_csv_round_trip_rate_exact(tmp_path):
+    imu = _rate_imu(runs=2)
+    p = write_csv(tmp_path / "r.csv", imu, run=1)
+    back, meta = read_imu(p)
+    assert back.kind == "rate" and back.runs == 1 and meta["path"] == str(p)
+    np.testing.assert_array_equal(back.t, imu.t)
+    np.testing.assert_array_equal(back.gyro[0], imu.gyro[1])
+    np.testing.assert_array_equal(back.accel[0], imu.accel[1])
+
+
+def test_npz_round_trip_rate_exact(tmp_path):
+    imu = _rate_imu()
+    p = write_npz(tmp_path / "r.npz", imu)
+    back, meta = read_imu(p)
+    assert back.kind == "rate" and meta["format"] == "npz"
+    np.testing.assert_array_equal(back.t, imu.t)
+    np.testing.assert_array_equal(back.gyro, imu.gyro)
+    np.testing.assert_array_equal(back.accel, imu.accel)
+
+
+@pytest.mark.parametrize("ext,writer", [(".csv", write_csv), (".npz", write_npz)])
+def test_increments_written_as_average_rates(tmp_path, ext, writer):
+    imu = _incr_imu()
+    back, _ = read_imu(writer(tmp_path / ("i" + ext), imu, run=1))
+    np.testing.assert_array_equal(back.t, imu.t - 0.5 * imu.dt)
+    np.testing.assert_array_equal(back.gyro[0], imu.gyro[1] / imu.dt)
+    np.testing.assert_array_equal(back.accel[0], imu.accel[1] / imu.dt)
+
+
+def test_psins_round_trip_residual_carry(tmp_path):
+    imu = _incr_imu(n=3000)
+    att0, lat, lon, h, g = (0.01, -0.02, 2.5), 0.6, 2.0, 35.0, 9.79
+    p = write_psins(tmp_path / "x.imu", imu, att0, v0=(0.1, 0.2, 0.0), lat=lat, lon=lon, h=h, g=g,
+                    gyro_scale_arcsec=0.01, accel_scale_ugs=10.0, run=1)
+    back, meta = read_imu(p)
+    assert back.kind == "increment" and back.samples == imu.samples
+    np.testing.assert_allclose(back.t, imu.t, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(meta["attitude0"], att0, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(meta["v0"], (0.1, 0.2, 0.0))
+    assert meta["lat"] == pytest.approx(lat, abs=1e-15) and meta["lon"] == pytest.approx(lon, abs=1e-15)
+    assert (meta["h"], meta["g"]) == (h, g)
+    assert meta["dt"] == pytest.approx(imu.dt, rel=1e-12)
+    assert meta["t0"] == pytest.approx(imu.t0, abs=1e-12)
+    qg, qa = 0.01 * ARCSEC, 10.0 * 1e-6 * g
+    err_g = (np.cumsum(back.gyro[0], 0) - np.cumsum(imu.gyro[1], 0)) / qg
+    err_a = (np.cumsum(back.accel[0], 0) - np.cumsum(imu.accel[1], 0)) / qa
+    # residual carry: every cumulative sum within half a count (plus float round-off), never a drift
+    assert np.abs(err_g).max() <= 0.5 + 1e-6 and np.abs(err_a).max() <= 0.5 + 1e-6
+    # whereas per-sample rounding would drift (the check is sensitive)
+    naive = np.rint(imu.accel[1] / qa) * qa
+    assert np.abs(np.cumsum(naive - imu.accel[1], 0)).max() / qa > 1.0
+    # the counts themselves are integers
+    counts = np.loadtxt(p, comments="%", skiprows=8, dtype=np.int64)
+    assert counts.shape == (imu.samples, 6)
+
+
+def test_psins_from_rates_uses_trapezoid_increments(tmp_path):
+    imu = _rate_imu(n=400, dt=0.01)
+    back, meta = read_imu(write_psins(tmp_path / "r.imu", imu, (0, 0, 0), lat=0.5))
+    t_end, dth, dv = imu.increments()
+    assert back.samples == t_end.size and meta["t0"] == pytest.approx(imu.t[0], abs=1e-12)
+    np.testing.assert_allclose(back.t, t_end, atol=1e-9)
+    qg, qa = 0.01 * ARCSEC, 10e-6 * 9.780325
+    assert np.abs(np.cumsum(back.gyro[0] - dth[0], 0)).max() <= (0.5 + 1e-6) * qg
+    assert np.abs(np.cumsum(back.accel[0] - dv[0], 0)).max() <= (0.5 + 1e-6) * qa
+
+
+# ---------------------------------------------------------------- fixtures
+
+def test_psins_fixture_header_and_samples():
+    imu, meta = read_imu(DATA / "pyins_sway_lat30s.imu")
+    truth = json.loads((DATA / "pyins_sway_lat30s.json").read_text())
+    first = dcm_to_euler(np.array(truth["C_bn_first"]))
+    np.testing.assert_allclose(meta["attitude0"], first, atol=1e-6)
+    np.testing.assert_allclose(np.array(meta["attitude0"]) / DEG, [-2.0, 1.0, 160.0], atol=1e-9)
+    assert imu.kind == "increment" and imu.runs == 1 and imu.samples == 5999
+    assert meta["dt"] == pytest.approx(0.020) and imu.dt == pytest.approx(0.020)
+    assert meta["t0"] == 0.0 and imu.t[0] == pytest.approx(0.02) and imu.t[-1] == pytest.approx(119.98)
+    assert meta["lat"] == pytest.approx(truth["lat_deg"] * DEG)
+    assert meta["lon"] == pytest.approx(truth["lon_deg"] * DEG)
+    assert meta["h"] == truth["height_m"] and meta["g"] == 9.780325 and meta["v0"] == [0, 0, 0]
+    # first row: 6874 9179 -4416 -35 -70 2001
+    np.testing.assert_allclose(imu.gyro[0, 0], np.array([6874, 9179, -4416]) * 0.01 * ARCSEC)
+    np.testing.assert_allclose(imu.accel[0, 0], np.array([-35, -70, 2001]) * 10e-6 * 9.780325)
+
+
+@pytest.mark.parametrize("name", ["pyins_sway_lat30s.csv", "pyins_static_40n_perfect.csv",
+                                  "pyins_static_40n_noisy.csv"])
+def test_csv_fixtures_read(name):
+    imu, meta = read_imu(DATA / name)
+    assert imu.kind == "rate" and imu.runs == 1 and imu.samples > 100
+    assert 9.7 < np.linalg.norm(imu.accel[0, 0]) < 9.9
+
+
+def test_csv_columns_any_order_extra_columns_and_comments(tmp_path):
+    p = tmp_path / "o.csv"
+    p.write_text("# a comment\n\naz,label,t,ay,ax,gz,gy,gx\n"
+                 "9.8,x,0.0,0.2,0.1,3,2,1\n# mid comment\n9.9,y,0.5,0.3,0.2,6,5,4\n")
+    imu, _ = read_imu(p)
+    np.testing.assert_array_equal(imu.t, [0.0, 0.5])
+    np.testing.assert_array_equal(imu.gyro[0], [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(imu.accel[0], [[0.1, 0.2, 9.8], [0.2, 0.3, 9.9]])
+
+
+# ---------------------------------------------------------------- bad files
+
+def test_missing_column(tmp_path):
+    p = _csv(tmp_path, [r[:3] + r[4:] for r in _good_rows()], header="t,gx,gy,ax,ay,az")
+    msg = _assert_error(p, ["missing"])
+    assert "'gz'" in msg and HEADER in msg
+
+
+@pytest.mark.parametrize("bad,word", [("nan", "nan"), ("inf", "inf"), ("-inf", "inf")])
+def test_non_finite_cell(tmp_path, bad, word):
+    rows = _good_rows()
+    rows[4][2] = bad
+    msg = _assert_error(_csv(tmp_path, rows), [word])
+    assert "row 4" in msg and "'gy'" in msg and "non-finite" in msg
+
+
+def test_non_numeric_cell(tmp_path):
+    rows = _good_rows()
+    rows[6][5] = "abc"
+    msg = _assert_error(_csv(tmp_path, rows), ["non-numeric"])
+    assert "'abc'" in msg and "row 6" in msg and "line 8" in msg and "'ay'" in msg
+
+
+def test_wrong_field_count(tmp_path):
+    rows = _good_rows()
+    rows[3] = rows[3][:5]
+    _assert_error(_csv(tmp_path, rows), ["fields"])
+
+
+def test_non_increasing_time(tmp_path):
+    rows = _good_rows()
+    rows[5][0] = rows[4][0]
+    msg = _assert_error(_csv(tmp_path, rows), ["not strictly increasing"])
+    assert "row 5" in msg
+
+
+def test_decreasing_time(tmp_path):
+    rows = _good_rows()
+    rows[5][0], rows[6][0] = rows[6][0], rows[5][0]
+    _assert_error(_csv(tmp_path, rows), ["not strictly increasing"])
+
+
+def test_non_uniform_time(tmp_path):
+    rows = _good_rows(20)
+    for r in rows[12:]:
+        r[0] += 0.05
+    msg = _assert_error(_csv(tmp_path, rows), ["non-uniform"])
+    assert "row 12" in msg and "0.15" in msg
+
+
+def test_small_jitter_accepted(tmp_path):
+    rows = _good_rows(20)
+    rows[7][0] += 0.5e-4  # 5e-4 of the 0.1 s step, inside the 1e-3 tolerance
+    imu, _ = read_imu(_csv(tmp_path, rows))
+    assert imu.samples == 20
+
+
+def test_too_short(tmp_path):
+    msg = _assert_error(_csv(tmp_path, _good_rows(5)), ["too short"], min_samples=50)
+    assert "5 samples" in msg and "at least 50" in msg
+    _assert_error(_csv(tmp_path, _good_rows(1), name="one.csv"), ["too short"])
+    _assert_error(_csv(tmp_path, [], name="empty.csv"), ["too short"])
+
+
+def test_no_header(tmp_path):
+    p = tmp_path / "blank.csv"
+    p.write_text("# only a comment\n")
+    _assert_error(p, ["header"])
+
+
+def test_missing_file(tmp_path):
+    for name in ("nope.csv", "nope.npz", "nope.imu"):
+        _assert_error(tmp_path / name, ["not found"])
+
+
+def test_directory_instead_of_file(tmp_path):
+    d = tmp_path / "dir.csv"
+    d.mkdir()
+    _assert_error(d, ["directory"])
+
+
+def test_unknown_extension(tmp_path):
+    p = tmp_path / "data.txt"
+    p.write_text(HEADER + "\n")
+    msg = _assert_error(p, ["extension"])
+    assert "'.txt'" in msg and ".csv" in msg and ".npz" in msg and ".imu" in msg
+
+
+def _npz(tmp_path, name="x.npz", n=10, **override):
+    arrays = {"t": 0.1 * np.arange(n), "gyro": np.zeros((n, 3)), "accel": np.full((n, 3), 9.8)}
+    arrays.update(override)
+    arrays = {k: v for k, v in arrays.items() if v is not None}
+    p = tmp_path / name
+    with open(p, "wb") as f:
+        np.savez(f, **arrays)
+    return p
+
+
+def test_npz_wrong_shape(tmp_path):
+    msg = _assert_error(_npz(tmp_path, gyro=np.zeros((10, 2))), ["shape"])
+    assert "'gyro'" in msg and "(10, 2)" in msg and "(10, 3)" in msg
+    _assert_error(_npz(tmp_path, "t2.npz", t=np.zeros((10, 1))), ["shape"])
+    _assert_error(_npz(tmp_path, "a3.npz", accel=np.zeros((9, 3))), ["shape"])
+
+
+def test_npz_missing_array_nan_and_bad_archive(tmp_path):
+    assert "'accel'" in _assert_error(_npz(tmp_path, accel=None), ["missing"])
+    g = np.zeros((10, 3))
+    g[3, 1] = np.nan
+    msg = _assert_error(_npz(tmp_path, "n.npz", gyro=g), ["nan"])
+    assert "index 3" in msg and "'gy'" in msg
+    t = 0.1 * np.arange(10)
+    t[7] = t[6]
+    _assert_error(_npz(tmp_path, "t.npz", t=t), ["not strictly increasing"])
+    _assert_error(_npz(tmp_path, "s.npz", t=np.array(["a"] * 10)), ["dtype"])
+    bad = tmp_path / "bad.npz"
+    bad.write_text("not a zip")
+    _assert_error(bad, ["npz"])
+
+
+PSINS_HEAD = ("% comment\n\n-2 1 160 0 0 0\n-30 150 0 0 20 9.780325\n"
+              "0.01 0.01 0.01 10 10 10\n")
+
+
+def _imu_file(tmp_path, rows, head=PSINS_HEAD, name="x.imu"):
+    p = tmp_path / name
+    p.write_text(head + "".join(r + "\n" for r in rows))
+    return p
+
+
+def test_psins_minimal_and_bad_rows(tmp_path):
+    good = ["1 2 3 4 5 2001"] * 4
+    imu, meta = read_imu(_imu_file(tmp_path, good))
+    assert imu.samples == 4 and meta["dt"] == pytest.approx(0.02)
+    msg = _assert_error(_imu_file(tmp_path, good[:2] + ["1 2 3 4 5"] + good, name="f.imu"), ["fields"])
+    assert "line 8" in msg and "6 integers" in msg
+    msg = _assert_error(_imu_file(tmp_path, good + ["1 2 3.5 4 5 6"], name="i.imu"), ["integer"])
+    assert "'3.5'" in msg
+    _assert_error(_imu_file(tmp_path, good + ["1 2 x 4 5 6"], name="x2.imu"), ["integer"])
+    _assert_error(_imu_file(tmp_path, good[:1], name="s.imu"), ["too short"])
+
+
+def test_psins_bad_header(tmp_path):
+    rows = ["1 2 3 4 5 6"] * 3
+    msg = _assert_error(_imu_file(tmp_path, rows, head="-2 1 160 0 0\n-30 150 0 0 20 9.78\n"
+                                  "0.01 0.01 0.01 10 10 10\n"), ["fields"])
+    assert "header row 1" in msg
+    _assert_error(_imu_file(tmp_path, rows, head="-2 1 160 0 0 0\n-30 150 0 0 nan 9.78\n"
+                            "0.01 0.01 0.01 10 10 10\n", name="n.imu"), ["finite"])
+    _assert_error(_imu_file(tmp_path, rows, head="-2 1 160 0 0 0\n-30 150 0 0 -20 9.78\n"
+                            "0.01 0.01 0.01 10 10 10\n", name="d.imu"), ["positive"])
+    _assert_error(_imu_file(tmp_path, [], head="% only\n-2 1 160 0 0 0\n", name="h.imu"), ["header"])
+
+
+def test_error_is_a_value_error_with_attributes(tmp_path):
+    with pytest.raises(ValueError) as ei:
+        read_imu(tmp_path / "gone.csv")
+    assert ei.value.path == str(tmp_path / "gone.csv") and ei.value.problem == "file not found"
+
+
+# ---------------------------------------------------------------- atomic writes
+
+@pytest.mark.parametrize("writer", ["csv", "npz", "imu"])
+def test_write_into_a_file_as_directory_fails_cleanly(tmp_path, writer):
+    blocker = tmp_path / "blocker"
+    blocker.write_text("I am a file")
+    target = blocker / f"out.{writer}"
+    fn = {"csv": write_csv, "npz": write_npz, "imu": lambda p, i: write_psins(p, i, (0, 0, 0), lat=0.5)}
+    with pytest.raises(OSError):
+        fn[writer](target, _rate_imu())
+    assert not os.path.exists(target)
+    assert sorted(os.listdir(tmp_path)) == ["blocker"]
+
+
+@pytest.mark.parametrize("writer", [write_csv, write_npz,
+                                    lambda p, i: write_psins(p, i, (0, 0, 0), lat=0.5)])
+def test_exception_mid_write_leaves_nothing(tmp_path, monkeypatch, writer):
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full (simulated)")
+    monkeypatch.setattr(fio.np, "savetxt", boom)
+    monkeypatch.setattr(fio.np, "savez", boom)
+    target = tmp_path / "out.dat"
+    with pytest.raises(RuntimeError):
+        writer(target, _rate_imu())
+    assert not target.exists() and os.listdir(tmp_path) == []
+
+
+def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
+    target = tmp_path / "keep.csv"
+    write_csv(target, _rate_imu(seed=3))
+    before = target.read_bytes()
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("simulated")
+    monkeypatch.setattr(fio.np, "savetxt", boom)
+    with pytest.raises(RuntimeError):
+        write_csv(target, _rate_imu(seed=4))
+    assert target.read_bytes() == before and os.listdir(tmp_path) == ["keep.csv"]
+
+
+def test_non_finite_data_not_written(tmp_path):
+    imu = _rate_imu()
+    imu.gyro[0, 5, 0] = np.nan
+    with pytest.raises(ValueError):
+        write_csv(tmp_path / "n.csv", imu)
+    with pytest.raises(ValueError):
+        write_psins(tmp_path / "n.imu", imu, (0, 0, 0), lat=0.1)
+    assert os.listdir(tmp_path) == []
