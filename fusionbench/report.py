@@ -48,12 +48,8 @@ def error_figure(out, path):
         ax.axhline(lim[i], color="k", ls="--", lw=1, label="limit" if i == 0 else None)
         ax.set_ylabel(f"phi{'ENU'[i]} (arcmin)")
         ax.grid(alpha=0.3)
-        # zoom on the settled part: the last 70 % of the record
-        vals = np.concatenate([oc.phi[:, oc.t >= oc.t[0] + 0.3 * (oc.t[-1] - oc.t[0]), i].ravel() / units.ARCMIN
-                               for oc in out.outcomes.values()] + [[lim[i]]])
-        lo, hi = np.percentile(vals, [1, 99])
-        pad = max(0.2 * (hi - lo), 0.05)
-        ax.set_ylim(lo - pad, hi + pad)
+        # symmetric-log scale: large initial errors and arcsecond-level settling on one axis
+        ax.set_yscale("symlog", linthresh=max(0.1, 2 * abs(lim[i])))
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(f"{out.metrics['scenario']}: misalignment, Monte Carlo mean and 1-sigma ({out.metrics['runs']} runs)")

@@ -1,0 +1,94 @@
+"""The command line end to end, through subprocesses, as a user runs it."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fusionbench import attitude, trajectory as tj, units
+from fusionbench.imu import PRESETS, simulate
+from fusionbench.io import write_csv
+
+D = np.pi / 180
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "fusionbench", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+def test_console_script_is_installed_and_reports_its_version():
+    exe = shutil.which("fusionbench")
+    assert exe, "pip install . puts the fusionbench console script on PATH"
+    r = subprocess.run([exe, "--version"], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.startswith("fusionbench ")
+
+
+def test_list_names_scenarios_and_methods():
+    r = cli("list")
+    assert r.returncode == 0
+    for name in ("static-34n", "sway-34n", "coarse", "coarse-i0"):
+        assert name in r.stdout
+
+
+@pytest.mark.parametrize("heading", [200.0, -179.0])
+def test_align_json_on_a_written_csv_from_any_heading(tmp_path, heading):
+    lat = -30 * D
+    tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(2 * D, -1 * D, -heading * D)), duration=120.0)
+    spec = PRESETS["navigation"].noise_free()
+    data = simulate(tr, spec, 0.01)
+    path = write_csv(tmp_path / "rec.csv", data)
+    r = cli("align", path, "--lat", -30, "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert set(out) == {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg"}
+    C_true = tr.truth([120.0]).C_bn[0]
+    err = attitude.misalignment(np.array(out["C_bn"]), C_true)
+    # noise-free navigation-grade biases: level within 0.5 arcmin, azimuth within 3 arcmin of the truth
+    assert np.abs(err[:2]).max() < 0.5 * units.ARCMIN and abs(err[2]) < 3 * units.ARCMIN
+    assert out["heading_deg"] == pytest.approx(heading % 360, abs=0.05)
+    assert out["t_end"] == pytest.approx(120.0 - 0.005, abs=1e-9)
+
+
+def test_align_bad_file_is_one_clear_line_and_exit_2(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("t,gx,gy,gz,ax,ay\n0,0,0,0,0,0\n")
+    r = cli("align", p, "--lat", 34)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "bad.csv" in r.stderr and "az" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_align_refuses_an_impossible_latitude_and_an_unknown_method(tmp_path):
+    r = cli("align", tmp_path / "x.csv", "--lat", 95)
+    assert r.returncode == 2 and "latitude" in r.stderr
+    r = cli("align", tmp_path / "x.csv", "--lat", 30, "--method", "magic")
+    assert r.returncode == 2 and "magic" in r.stderr
+
+
+def test_run_check_and_regression(tmp_path):
+    out = tmp_path / "rep"
+    r = cli("run", "static-34n", "--quick", "--runs", 2, "--out", out, "--methods", "coarse,baselines.coarse:InertialCoarseAligner")
+    assert r.returncode == 0, r.stderr
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["quick"] is True and m["runs"] == 2
+    assert set(m["methods"]) == {"coarse", "baselines.coarse:InertialCoarseAligner"}
+    assert (out / "report.md").exists() and (out / "errors.png").exists()
+    ref = tmp_path / "ref.json"
+    ref.write_text(json.dumps(m))
+    assert cli("check", out, "--reference", ref).returncode == 0
+    m["methods"]["coarse"]["final_error_arcmin"]["U"]["rms"] /= 3
+    ref.write_text(json.dumps(m))
+    r = cli("check", out, "--reference", ref)
+    assert r.returncode == 1 and "final phiU |rms|" in r.stdout
+
+
+def test_run_with_a_bad_scenario_file_writes_nothing(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('name = "x"\nduration_s = 10\nrate_hz = 10\n[site]\nlat_deg = 91\n')
+    r = cli("run", p, "--out", tmp_path / "o")
+    assert r.returncode == 2 and "lat_deg" in r.stderr and str(p) in r.stderr
+    assert not (tmp_path / "o").exists()

@@ -1,0 +1,60 @@
+"""Metrics: limits, settling time and statistics against closed forms."""
+
+import numpy as np
+import pytest
+
+from fusionbench import attitude, earth, metrics, units
+
+D = np.pi / 180
+
+
+def test_limits_for_a_level_north_facing_imu():
+    lat = 34 * D
+    g = earth.gravity(lat)
+    eps = np.array([1e-7, 2e-7, 3e-7])  # body = ENU when level and facing north
+    nab = np.array([3e-4, -2e-4, 1e-4])
+    lim = metrics.theoretical_limits(eps, nab, np.eye(3), lat)
+    W = earth.OMEGA_IE
+    assert lim == pytest.approx([2e-4 / g, 3e-4 / g, -1e-7 / (W * np.cos(lat)) + np.tan(lat) * 3e-4 / g], rel=1e-14)
+
+
+def test_limits_rotate_with_heading():
+    # facing east (yaw -90 deg): body x points south, so a body-x gyro bias is a -north bias: no azimuth limit
+    C = attitude.euler_to_dcm([0, 0, -90 * D])
+    lim = metrics.theoretical_limits([1e-7, 0, 0], [0, 0, 0], C, 0.5)
+    assert lim[2] == pytest.approx(0.0, abs=1e-12)
+    lim = metrics.theoretical_limits([0, 1e-7, 0], [0, 0, 0], C, 0.5)
+    assert lim[2] == pytest.approx(-1e-7 / (earth.OMEGA_IE * np.cos(0.5)), rel=1e-12)
+
+
+def test_settling_time_of_an_exponential_decay():
+    t = np.linspace(0, 100, 100001)
+    x = 60.0 * np.exp(-t / 10.0)
+    # |x - x_end| < 1 from t = 10 ln(60 / (1 + x_end))
+    expect = 10 * np.log(60.0 / (1.0 + x[-1]))
+    assert metrics.settling_time(t, x, 1.0) == pytest.approx(expect, abs=2e-3)
+    assert metrics.settling_time(t, np.zeros_like(t), 1.0) == 0.0
+
+
+def test_settling_time_is_batched():
+    t = np.arange(5.0)
+    x = np.array([[5, 0, 0, 0, 0], [0, 0, 0, 5, 0]], dtype=float)
+    assert metrics.settling_time(t, x, 1.0).tolist() == [1.0, 4.0]
+
+
+def test_stats_and_window_rms():
+    s = metrics.stats([3.0, -4.0])
+    assert s == {"mean": -0.5, "std": 3.5, "rms": pytest.approx(np.sqrt(12.5)), "max_abs": 4.0}
+    t = np.arange(10.0)
+    x = np.where(t >= 5, 2.0, 100.0)
+    assert metrics.rmse_window(t, x, 5.0) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="window"):
+        metrics.rmse_window(t, x, 50.0)
+
+
+def test_misalignment_history_shape_and_units():
+    C = attitude.euler_to_dcm(np.zeros((4, 3)))
+    est = attitude.apply_misalignment(C, [units.ARCMIN, 0, 0])[None]
+    phi = metrics.misalignment_history(est, C)
+    assert phi.shape == (1, 4, 3)
+    assert phi[0, :, 0] / units.ARCMIN == pytest.approx(np.ones(4), rel=1e-12)
