@@ -168,3 +168,28 @@ def test_psins_copy_reaches_the_same_attitude_within_its_quantisation():
     bound = np.linalg.norm(drift) + 0.05 * units.ARCSEC + 0.1 * np.linalg.norm(drift)
     assert np.linalg.norm(err) < bound
     assert np.linalg.norm(err) > 0.5 * np.linalg.norm(drift)  # the drift is really there
+
+
+def test_ship_profile_position_after_20_hours_matches_the_closed_form():
+    lat = 35 * D
+    tr = tj.ship(lat, 241 * D, accel=0.05)
+    t_acc = 20.0 / 0.05
+    s = tr.truth([tr.duration, 12 * 3600.0 + t_acc / 2])
+    distance = 0.5 * 0.05 * t_acc**2 + 20.0 * (tr.duration - 12 * 3600.0 - t_acc)
+    _, rn = earth.radii(lat)
+    assert s.lat[0] == pytest.approx(lat, abs=1e-14)
+    assert (s.lon[0] - 241 * D) * rn * np.cos(lat) == pytest.approx(distance, rel=1e-10)
+    assert s.v_n[0] == pytest.approx([20.0, 0.0, 0.0], abs=1e-12)
+    assert s.v_n[1, 0] == pytest.approx(10.0, rel=1e-12)
+    # sea sway: pitch 1.2 deg sin(2 pi t / 7)
+    e = attitude.dcm_to_euler(tr.truth([1.75]).C_bn[0])
+    assert np.degrees(e[0]) == pytest.approx(1.2, abs=1e-9)
+
+
+def test_moored_profile_is_seed000_table1():
+    tr = tj.moored(LAT, duration=60.0)
+    v, _ = tr.velocity(np.linspace(0, 600, 60001))
+    assert v.std(axis=0) == pytest.approx([0.05] * 3, rel=0.1)  # RMS of the 16-tone multisine
+    # pitch 5 deg sin(2 pi 0.5 t) peaks at t = 0.5 s, roll 7 deg sin(2 pi 0.3 t) at t = 5/6 s
+    assert np.degrees(attitude.dcm_to_euler(tr.truth([0.5]).C_bn[0])[0]) == pytest.approx(5.0, abs=1e-9)
+    assert np.degrees(attitude.dcm_to_euler(tr.truth([5 / 6]).C_bn[0])[1]) == pytest.approx(7.0, abs=1e-9)
