@@ -96,3 +96,14 @@ def test_check_flags_only_regressions():
     rows = compare(worse, ref)
     assert [r[1] for r in rows] == ["final phiU |rms| (arcmin)", "settling U mean (s)"]
     assert compare({"methods": {}}, ref)[0][1] == "method missing from run"
+
+
+def test_imu_overrides_are_converted_from_customary_units(tmp_path):
+    from fusionbench import units
+    p = tmp_path / "o.toml"
+    p.write_text(TOML.replace('preset = "tactical"', 'preset = "tactical"\ngyro_bias_dph = [0.02, 0, 0]\n'
+                              'vrw_ug_rthz = 7.0\nrandom = false'))
+    spec = scenarios.load(p).imu_spec
+    assert spec.gyro.bias == pytest.approx((0.02 * units.DEG_PER_H, 0, 0))
+    assert spec.accel.white == (0.0, 0.0, 0.0)  # random = false keeps only deterministic errors
+    assert spec.accel.scale == pytest.approx((300e-6,) * 3)

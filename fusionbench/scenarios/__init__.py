@@ -67,11 +67,24 @@ _SECTIONS = {
     "attitude": {"pitch_deg", "roll_deg", "heading_deg", "sway_amplitude_deg", "sway_frequency_hz",
                  "sway_phase_deg"},
     "motion": {"start_s", "segments", "disturbance_rms_mps", "disturbance_band_hz", "disturbance_seed"},
-    "imu": {"preset", "random", "gyro_bias_dph", "accel_bias_ug", "arw_dpsh", "vrw_ug_rthz",
-            "gyro_bias_sigma_dph", "accel_bias_sigma_ug", "gyro_scale_ppm", "accel_scale_ppm", "schedule"},
+    "imu": {"preset", "random", "schedule", "gyro_bias_dph", "gyro_bias_sigma_dph", "arw_dpsh", "gyro_scale_ppm",
+            "accel_bias_ug", "accel_bias_sigma_ug", "vrw_ug_rthz", "accel_scale_ppm"},
     "vref": {"sigma_mps", "schedule"},
     "init": {"misalignment_deg"},
     "metrics": {"settling_band_arcmin"},
+}
+
+
+#: [imu] overrides of a preset: key -> (sensor, SensorErrors field, unit factor to SI)
+_OVERRIDES = {
+    "gyro_bias_dph": ("gyro", "bias", units.DEG_PER_H),
+    "gyro_bias_sigma_dph": ("gyro", "bias_sigma", units.DEG_PER_H),
+    "arw_dpsh": ("gyro", "white", units.DEG_PER_SQRT_H),
+    "gyro_scale_ppm": ("gyro", "scale", units.PPM),
+    "accel_bias_ug": ("accel", "bias", units.UG),
+    "accel_bias_sigma_ug": ("accel", "bias_sigma", units.UG),
+    "vrw_ug_rthz": ("accel", "white", units.UG_PER_SQRT_HZ),
+    "accel_scale_ppm": ("accel", "scale", units.PPM),
 }
 
 
@@ -173,24 +186,12 @@ def _imu_spec(d, src):
     if preset not in imu.PRESETS:
         raise ScenarioError(f"{_where(src, 'imu.preset')}: expected one of {sorted(imu.PRESETS)}, found {preset!r}")
     spec = imu.PRESETS[preset]
-    g, a = spec.gyro, spec.accel
-    s = f"{src} [imu]"
-    if "gyro_bias_dph" in d:
-        g = replace(g, bias=np.multiply(_vec(d, "gyro_bias_dph", s), units.DEG_PER_H))
-    if "gyro_bias_sigma_dph" in d:
-        g = replace(g, bias_sigma=np.multiply(_vec(d, "gyro_bias_sigma_dph", s), units.DEG_PER_H))
-    if "arw_dpsh" in d:
-        g = replace(g, white=np.multiply(_vec(d, "arw_dpsh", s), units.DEG_PER_SQRT_H))
-    if "gyro_scale_ppm" in d:
-        g = replace(g, scale=np.multiply(_vec(d, "gyro_scale_ppm", s), units.PPM))
-    if "accel_bias_ug" in d:
-        a = replace(a, bias=np.multiply(_vec(d, "accel_bias_ug", s), units.UG))
-    if "accel_bias_sigma_ug" in d:
-        a = replace(a, bias_sigma=np.multiply(_vec(d, "accel_bias_sigma_ug", s), units.UG))
-    if "vrw_ug_rthz" in d:
-        a = replace(a, white=np.multiply(_vec(d, "vrw_ug_rthz", s), units.UG_PER_SQRT_HZ))
-    if "accel_scale_ppm" in d:
-        a = replace(a, scale=np.multiply(_vec(d, "accel_scale_ppm", s), units.PPM))
+    sensors = {"gyro": spec.gyro, "accel": spec.accel}
+    for key, (sensor, name, factor) in _OVERRIDES.items():
+        if key in d:
+            values = np.multiply(_vec(d, key, f"{src} [imu]"), factor)
+            sensors[sensor] = replace(sensors[sensor], **{name: values})
+    g, a = sensors["gyro"], sensors["accel"]
     spec = replace(spec, gyro=g, accel=a, schedules=_schedules(d.get("schedule", []), src, "imu.schedule"))
     random = d.get("random", True)
     if not isinstance(random, bool):
