@@ -84,7 +84,7 @@ def _vm_hwm_mb():
     return None
 
 
-def long_child(hours, free_vertical=False):
+def long_child(hours, free_vertical=False, perfect=False):
     """Body of the child process: one run of ``hours`` h at 100 Hz, chunk by chunk."""
     t_start = time.perf_counter()
     from fusionbench import attitude, imu
@@ -92,7 +92,7 @@ def long_child(hours, free_vertical=False):
 
     duration = hours * 3600.0
     tr = ship_trajectory(duration)
-    spec = imu.PRESETS["seed004"]
+    spec = imu.PRESETS["seed004"].perfect() if perfect else imu.PRESETS["seed004"]
     state = initial_state(tr, 1)
     # warm-up (JIT compile or cache load) so that the wall time is the processing alone
     Strapdown(state, DT).run(np.zeros((1, 10, 3)), np.zeros((1, 10, 3)), record_every=5)
@@ -126,13 +126,16 @@ def long_child(hours, free_vertical=False):
     hist = {k: np.concatenate(v, axis=1) for k, v in hist.items()}
 
     truth = tr.truth([t_end])
-    phi = attitude.misalignment(sd.state.C_bn[0], truth.C_bn[0])
+    finite = bool(np.all(np.isfinite(sd.state.C_bn)) and np.all(np.isfinite(sd.state.v_n)))
+    # a free vertical channel can overflow over many hours: report NaN rather than fail
+    phi = attitude.misalignment(sd.state.C_bn[0], truth.C_bn[0]) if finite else np.full(3, np.nan)
     rm_h = 6371e3
     pos_err = np.hypot((sd.state.lat[0] - truth.lat[0]) * rm_h,
                        (sd.state.lon[0] - truth.lon[0]) * rm_h * np.cos(truth.lat[0]))
     return {
         "hours": hours,
         "height_fixed": hold,
+        "imu": spec.name,
         "samples": samples,
         "records": int(hist["C_bn"].shape[1]),
         "wall_s": wall,
@@ -147,15 +150,17 @@ def long_child(hours, free_vertical=False):
         "vel_err_mps": (sd.state.v_n[0] - truth.v_n[0]).tolist(),
         "h_err_m": float(sd.state.h[0] - truth.h[0]),
         "horiz_pos_err_m": float(pos_err),
-        "finite": bool(np.all(np.isfinite(sd.state.C_bn)) and np.all(np.isfinite(sd.state.v_n))),
+        "finite": finite,
     }
 
 
-def run_long_child(hours, free_vertical=False):
+def run_long_child(hours, free_vertical=False, perfect=False):
     """Start this script as a child for the long run and return its JSON result."""
     cmd = [sys.executable, os.path.abspath(__file__), "--_long-child", repr(hours)]
     if free_vertical:
         cmd.append("--free-vertical")
+    if perfect:
+        cmd.append("--perfect-imu")
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"long-run child failed ({proc.returncode}):\n{proc.stderr}")
@@ -163,16 +168,29 @@ def run_long_child(hours, free_vertical=False):
 
 
 # ----------------------------------------------------------------------------- IMU benchmark
-def bench_imu(runs, duration):
+def timed(fn, repeat=1):
+    """Call ``fn`` ``repeat`` times; return (best wall time s, all times, last result).
+
+    Best-of-n because the first touch of fresh memory can be several times slower on a virtual
+    machine (the host backs guest pages lazily); the first time is reported next to the best.
+    """
+    times, out = [], None
+    for _ in range(repeat):
+        out = None  # free the previous result before the next repetition
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), times, out
+
+
+def bench_imu(runs, duration, repeat):
     from fusionbench import imu
 
     tr = sway_trajectory(duration)
     spec = imu.PRESETS["seed000"]
     imu.simulate(sway_trajectory(1.0), spec, DT, runs=2, seed=SEED)  # warm caches/imports
 
-    t0 = time.perf_counter()
-    batched = imu.simulate(tr, spec, DT, runs=runs, seed=SEED)
-    t_batched = time.perf_counter() - t0
+    t_batched, t_all, batched = timed(lambda: imu.simulate(tr, spec, DT, runs=runs, seed=SEED), repeat)
 
     t_looped = 0.0
     identical = True
@@ -184,14 +202,13 @@ def bench_imu(runs, duration):
                           and np.array_equal(one.accel[0], batched.accel[k])
                           and np.array_equal(one.t, batched.t))
     n = batched.samples
-    # where a batched call spends its time: the shared exact increments vs the per-run errors
-    t0 = time.perf_counter()
-    tr.increments(0.0, DT, min(n, 60000))
-    t_inc = (time.perf_counter() - t0) * n / min(n, 60000)
+    # where a call spends its time: the exact increments (shared by all runs of a batch)
+    t_inc, _, _ = timed(lambda: tr.increments(0.0, DT, n), repeat)
     return batched, {
         "runs": runs,
         "samples": n,
         "batched_s": t_batched,
+        "batched_first_s": t_all[0],
         "looped_s": t_looped,
         "batched_per_s": runs * n / t_batched,
         "looped_per_s": runs * n / t_looped,
@@ -201,14 +218,19 @@ def bench_imu(runs, duration):
 
 
 # ----------------------------------------------------------------------- strapdown benchmark
-def _feed(sd, g, a, chunk, record_every):
-    outs = []
-    for k0 in range(0, g.shape[1], chunk):
-        outs.append(sd.run(g[:, k0:k0 + chunk], a[:, k0:k0 + chunk], record_every=record_every))
+def _split(g, a, chunk):
+    """Contiguous (runs, chunk, 3) pieces, as :func:`fusionbench.imu.simulate_chunks` yields them
+    (``Strapdown.run`` would otherwise copy each non-contiguous slice of a batch)."""
+    return [(np.ascontiguousarray(g[:, k0:k0 + chunk]), np.ascontiguousarray(a[:, k0:k0 + chunk]))
+            for k0 in range(0, g.shape[1], chunk)]
+
+
+def _feed(sd, chunks, record_every):
+    outs = [sd.run(dth, dv, record_every=record_every) for dth, dv in chunks]
     return {k: np.concatenate([o[k] for o in outs], axis=1) for k in outs[0]}
 
 
-def bench_strapdown(data, duration):
+def bench_strapdown(data, duration, repeat):
     import numba
 
     from fusionbench import strapdown as S
@@ -220,50 +242,42 @@ def bench_strapdown(data, duration):
     st1 = initial_state(tr, 1)
     chunk = min(STRAPDOWN_CHUNK, n)
     rec = 100
+    tiny = (np.zeros((1, 10, 3)), np.zeros((1, 10, 3)))
 
     # compile time: a fresh, uncached copy of the kernel (the library's own has cache=True),
     # swapped in for one tiny call so that Strapdown.run passes it its usual arguments
     library_kernel = S._integrate_numba
     S._integrate_numba = numba.njit(cache=False)(library_kernel.py_func)
     try:
-        t0 = time.perf_counter()
-        S.Strapdown(st1, DT).run(np.zeros((1, 10, 3)), np.zeros((1, 10, 3)), record_every=5)
-        t_compile = time.perf_counter() - t0
+        t_compile, _, _ = timed(lambda: S.Strapdown(st1, DT).run(*tiny, record_every=5))
     finally:
         S._integrate_numba = library_kernel
     # warm-up of the library kernel (cache load if its on-disk cache is valid, else a compile)
-    t0 = time.perf_counter()
-    S.Strapdown(st1, DT).run(np.zeros((1, 10, 3)), np.zeros((1, 10, 3)), record_every=5)
-    t_first = time.perf_counter() - t0
-    stats = S._integrate_numba.stats
-    cache_hit = sum(stats.cache_hits.values()) > 0
+    t_first, _, _ = timed(lambda: S.Strapdown(st1, DT).run(*tiny, record_every=5))
+    cache_hit = sum(S._integrate_numba.stats.cache_hits.values()) > 0
 
-    # numba batched
-    t0 = time.perf_counter()
-    out_b = _feed(S.Strapdown(st, DT, engine="numba"), g, a, chunk, rec)
-    t_b = time.perf_counter() - t0
-
-    # numba looped: one integrator per run, same chunks
-    t0 = time.perf_counter()
-    out_l = [_feed(S.Strapdown(initial_state(tr, 1), DT, engine="numba"), g[r:r + 1], a[r:r + 1], chunk, rec)
-             for r in range(runs)]
-    t_l = time.perf_counter() - t0
+    # numba batched: one integrator for all runs, fed chunk by chunk
+    chunks = _split(g, a, chunk)
+    t_b, tb_all, out_b = timed(lambda: _feed(S.Strapdown(st, DT, engine="numba"), chunks, rec), repeat)
+    del chunks
+    # numba looped: one integrator per run, same chunks (slices of one run are contiguous already)
+    t_l, tl_all, out_l = timed(lambda: [
+        _feed(S.Strapdown(initial_state(tr, 1), DT, engine="numba"), _split(g[r:r + 1], a[r:r + 1], chunk), rec)
+        for r in range(runs)], repeat)
     diff_bl = max(float(np.max(np.abs(out_l[r]["C_bn"][0] - out_b["C_bn"][r]))) for r in range(runs))
 
     # NumPy reference engine, batched, on the first NUMPY_SLICE samples
     m = min(NUMPY_SLICE, n)
-    t0 = time.perf_counter()
-    out_np = _feed(S.Strapdown(st, DT, engine="numpy"), g[:, :m], a[:, :m], m, rec)
-    t_np = time.perf_counter() - t0
-    ref = _feed(S.Strapdown(st, DT, engine="numba"), g[:, :m], a[:, :m], m, rec)
+    head = _split(g[:, :m], a[:, :m], m)
+    t_np, _, out_np = timed(lambda: _feed(S.Strapdown(st, DT, engine="numpy"), head, rec))
+    ref = _feed(S.Strapdown(st, DT, engine="numba"), head, rec)
     diff_np = float(np.max(np.abs(out_np["C_bn"] - ref["C_bn"])))
 
     # NumPy engine looped (a few runs, a few samples: it is the slow path batching exists for)
     rl, ml = min(NUMPY_LOOPED_RUNS, runs), min(NUMPY_LOOPED_SLICE, n)
-    t0 = time.perf_counter()
-    for r in range(rl):
+    t_npl, _, _ = timed(lambda: [
         S.Strapdown(initial_state(tr, 1), DT, engine="numpy").run(g[r:r + 1, :ml], a[r:r + 1, :ml], record_every=rec)
-    t_npl = time.perf_counter() - t0
+        for r in range(rl)])
 
     return {
         "runs": runs,
@@ -273,7 +287,9 @@ def bench_strapdown(data, duration):
         "first_call_s": t_first,
         "cache_hit": cache_hit,
         "batched_s": t_b,
+        "batched_first_s": tb_all[0],
         "looped_s": t_l,
+        "looped_first_s": tl_all[0],
         "batched_per_s": runs * n / t_b,
         "looped_per_s": runs * n / t_l,
         "max_diff_batched_looped": diff_bl,
@@ -298,35 +314,43 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="10 runs x 60 s, 2-hour long run (smoke test)")
     p.add_argument("--free-vertical", action="store_true",
                    help="long run: leave the (divergent) vertical channel free instead of holding the height")
+    p.add_argument("--perfect-imu", action="store_true",
+                   help="long run: error-free IMU (the attitude error must then be ~0: checks the pipeline)")
+    p.add_argument("--repeat", type=int, default=3, help="repetitions of the batched measurements (best kept)")
     p.add_argument("--_long-child", dest="long_child", type=float, default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
 
     if args.long_child is not None:
-        print(json.dumps(long_child(args.long_child, args.free_vertical)))
+        print(json.dumps(long_child(args.long_child, args.free_vertical, args.perfect_imu)))
         return 0
 
     runs, duration, hours = (10, 60.0, 2.0) if args.quick else (100, 600.0, 20.0)
     t_all = time.perf_counter()
+    load0 = os.getloadavg()[0]
     # the long run first, while this process is still small: a child's ru_maxrss can include the
     # peak of the address space it was started from, so start it before allocating anything
-    long = run_long_child(hours, args.free_vertical)
-    data, im = bench_imu(runs, duration)
-    sd = bench_strapdown(data, duration)
+    long = run_long_child(hours, args.free_vertical, args.perfect_imu)
+    data, im = bench_imu(runs, duration, args.repeat)
+    sd = bench_strapdown(data, duration, args.repeat)
     total = time.perf_counter() - t_all
+    load1 = os.getloadavg()[0]
 
     nproc = os.cpu_count()
     print(f"fusionbench core performance  ({'quick' if args.quick else 'full'}; {nproc} CPUs; "
-          f"numpy {np.__version__}; python {sys.version.split()[0]})")
+          f"numpy {np.__version__}; python {sys.version.split()[0]}; load average {load0:.2f} at start, "
+          f"{load1:.2f} at end)")
+    print(f"batched figures: best of {args.repeat} (first attempt in brackets); looped: one pass")
     print()
     print(f"1. IMU generation, seed-000 sway, preset seed000: {runs} runs x {duration:g} s x 100 Hz "
           f"= {runs * im['samples']:,} samples")
     print(f"   {'mode':<34}{'time, s':>10}{'samples/s':>16}")
-    print(f"   {'batched (1 call, runs=' + str(runs) + ')':<34}{im['batched_s']:>10.2f}{_fmt(im['batched_per_s']):>16}")
+    print(f"   {'batched (1 call, runs=' + str(runs) + ')':<34}{im['batched_s']:>10.2f}{_fmt(im['batched_per_s']):>16}"
+          f"   [{im['batched_first_s']:.2f} s]")
     print(f"   {'looped (' + str(runs) + ' calls, runs=1)':<34}{im['looped_s']:>10.2f}{_fmt(im['looped_per_s']):>16}")
     print(f"   batched / looped: {im['batched_per_s'] / im['looped_per_s']:.1f}x;  "
           f"outputs identical (np.array_equal): {im['identical']}")
     print(f"   trajectory.increments alone for {im['samples']:,} samples: {im['increments_s']:.2f} s "
-          f"(computed once per chunk per call)")
+          f"(once per call, shared by the runs of a batch)")
     print()
     print(f"2. Strapdown, same increments ({runs} x {sd['samples']:,}), chunks of {sd['chunk']} samples, "
           f"record_every=100")
@@ -334,14 +358,14 @@ def main(argv=None):
           f"first call: {sd['first_call_s']:.2f} s ({'cache hit' if sd['cache_hit'] else 'compiled'})")
     print(f"   {'mode':<42}{'time, s':>10}{'steps/s':>16}")
     rows = [
-        (f"numba batched (1 x {runs} runs)", sd["batched_s"], sd["batched_per_s"]),
-        (f"numba looped ({runs} x 1 run)", sd["looped_s"], sd["looped_per_s"]),
+        (f"numba batched (1 x {runs} runs)", sd["batched_s"], sd["batched_per_s"], sd["batched_first_s"]),
+        (f"numba looped ({runs} x 1 run)", sd["looped_s"], sd["looped_per_s"], sd["looped_first_s"]),
         (f"numpy batched ({runs} runs x {sd['numpy_samples']} samples)", sd["numpy_s"], sd["numpy_per_s"]),
         (f"numpy looped ({sd['numpy_looped_runs']} x 1 run x {sd['numpy_looped_samples']})",
          sd["numpy_looped_s"], sd["numpy_looped_per_s"]),
     ]
-    for name, t, r in rows:
-        print(f"   {name:<42}{t:>10.2f}{_fmt(r):>16}")
+    for name, t, r, *first in rows:
+        print(f"   {name:<42}{t:>10.2f}{_fmt(r):>16}" + (f"   [{first[0]:.2f} s]" if first else ""))
     print(f"   numba batched / looped: {sd['batched_per_s'] / sd['looped_per_s']:.2f}x;  "
           f"numba / numpy (batched): {sd['batched_per_s'] / sd['numpy_per_s']:.1f}x;  "
           f"numpy batched / looped: {sd['numpy_per_s'] / sd['numpy_looped_per_s']:.1f}x")
@@ -349,7 +373,7 @@ def main(argv=None):
           f"numpy vs numba {sd['max_diff_numpy_numba']:.1e}")
     print()
     print(f"3. Long run in a separate process: {hours:g} h x 100 Hz = {long['samples']:,} samples, ship sway, "
-          f"preset seed004, free inertial (position_fixed=False, "
+          f"IMU {long['imu']}, free inertial (position_fixed=False, "
           f"{'height held: height_fixed=True' if long['height_fixed'] else 'free vertical channel'}), "
           f"record_every=10000 "
           f"({long['records']} records kept)")
@@ -358,9 +382,9 @@ def main(argv=None):
     print(f"   wall time: {long['wall_s']:.1f} s  (IMU generation {long['imu_s']:.1f} s, strapdown "
           f"{long['strapdown_s']:.1f} s; imports and warm-up {long['setup_s']:.1f} s not included)")
     e = long["att_err_arcsec"]
-    print(f"   final attitude error vs truth: E {e[0]:.1f}, N {e[1]:.1f}, U {e[2]:.1f} arcsec "
-          f"(|phi| {long['att_err_norm_arcsec']:.1f}); velocity error "
-          f"{np.round(long['vel_err_mps'], 2).tolist()} m/s; height error {long['h_err_m']:.3g} m; "
+    print(f"   final attitude error vs truth: E {e[0]:.4g}, N {e[1]:.4g}, U {e[2]:.4g} arcsec "
+          f"(|phi| {long['att_err_norm_arcsec']:.4g}); velocity error "
+          f"[{', '.join(f'{x:.3g}' for x in long['vel_err_mps'])}] m/s; height error {long['h_err_m']:.3g} m; "
           f"horizontal position error {long['horiz_pos_err_m'] / 1852:.3g} nmi")
     print()
     print(f"total benchmark time: {total:.0f} s")
@@ -368,6 +392,9 @@ def main(argv=None):
     result = {
         "quick": bool(args.quick),
         "cpus": nproc,
+        "repeat": args.repeat,
+        "loadavg_start": load0,
+        "loadavg_end": load1,
         "imu_runs": runs,
         "imu_samples_per_run": im["samples"],
         "imu_batched_samples_per_s": im["batched_per_s"],
@@ -391,6 +418,7 @@ def main(argv=None):
         "strapdown_20h_s": long["strapdown_s"],
         "att_err_20h_arcsec": long["att_err_norm_arcsec"],
         "height_fixed_20h": long["height_fixed"],
+        "imu_20h": long["imu"],
         "total_s": total,
     }
     print(json.dumps(result))

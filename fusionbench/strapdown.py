@@ -283,19 +283,19 @@ def _rodrigues3(x, y, z, out):
     out[2, 1] = a * x + b * y * z
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _integrate_numba(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
                      position_fixed, height_fixed, record_every, out_C, out_v, out_p):
     """Compiled engine: the same arithmetic as :func:`_integrate_numpy`, one run at a time."""
     runs, n = dtheta.shape[0], dtheta.shape[1]
     has_cmd = cmd.shape[1] > 0
-    B = np.empty((3, 3))
-    N = np.empty((3, 3))
-    T = np.empty((3, 3))
-    C = np.empty((3, 3))
-    dvb = np.empty(3)
-    dvn = np.empty(3)
-    for r in range(runs):
+    for r in numba.prange(runs):  # runs are independent: one thread each, results bit-identical
+        B = np.empty((3, 3))
+        N = np.empty((3, 3))
+        T = np.empty((3, 3))
+        C = np.empty((3, 3))
+        dvb = np.empty(3)
+        dvn = np.empty(3)
         C[:, :] = C0[r]
         vE, vN, vU = v0[r, 0], v0[r, 1], v0[r, 2]
         pE, pN, pU = v_prev0[r, 0], v_prev0[r, 1], v_prev0[r, 2]
