@@ -106,9 +106,11 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     for m in methods:  # fail early, with the method's own message
         load_method(m)
     duration, default_runs = scn.sized(quick)
-    runs = int(runs or default_runs)
+    runs = default_runs if runs is None else int(runs)
     if runs < 1:
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
+    if int(seed) < 0:
+        raise ValueError(f"seed: expected a non-negative integer, found {seed}")
     n_samples = int(round(duration / scn.dt))
     if batch_size is None:
         batch_size = int(max(1, min(runs, BATCH_BYTES // (n_samples * 48))))

@@ -92,3 +92,11 @@ def test_run_with_a_bad_scenario_file_writes_nothing(tmp_path):
     r = cli("run", p, "--out", tmp_path / "o")
     assert r.returncode == 2 and "lat_deg" in r.stderr and str(p) in r.stderr
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("args,word", [(["--runs", "0"], "runs"), (["--seed", "-1"], "seed"),
+                                       (["--methods", "nope"], "nope")])
+def test_run_refuses_bad_sizes_and_methods(tmp_path, args, word):
+    r = cli("run", "static-34n", "--quick", "--out", tmp_path / "o", *args)
+    assert r.returncode == 2 and word in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "o").exists()
