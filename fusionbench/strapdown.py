@@ -206,7 +206,8 @@ class Strapdown:
         if omega_cmd is None:
             cmd = np.zeros((runs, 0, 3))
         else:
-            cmd = np.ascontiguousarray(np.broadcast_to(np.asarray(omega_cmd, dtype=float), (runs, n, 3)))
+            cmd = np.asarray(omega_cmd, dtype=float)
+            cmd = np.ascontiguousarray(np.broadcast_to(cmd[:, None] if cmd.ndim == 2 else cmd, (runs, n, 3)))
         m = n // record_every
         out_C = np.empty((runs, m, 3, 3))
         out_v = np.empty((runs, m, 3))
