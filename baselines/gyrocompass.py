@@ -1,0 +1,152 @@
+"""Classical (PID) strapdown gyrocompass alignment from any heading.
+
+Level loops (third order, per channel; north shown, east alike with the signs of b = -g)::
+
+    dvN' = g phiE + nabN - k1 dvN            (velocity damping, applied to the strapdown velocity)
+    w_cE = -(1 + k2) dvN / R - J,  J' = k3 dvN
+
+with the characteristic polynomial s^3 + k1 s^2 + ws^2 (1 + k2) s + g k3 = (s + sigma)(s^2 + 2 sigma s
++ sigma^2 / xi^2): ``k1 = 3 sigma``, ``k2 = sigma^2 (2 + 1/xi^2) / ws^2 - 1``, ``k3 = sigma^3 / (g xi^2)``.
+
+Compass loop (the north channel, second order, drives the azimuth)::
+
+    w_cE = -(1 + k2) dvN / R,  w_cU = k3 / (W cos L) x,  x' = -k4 x + dvN
+
+with s^4 + (k1 + k4) s^3 + ... = (s^2 + 2 sigma s + 2 sigma^2)^2: ``k1 = k4 = 2 sigma``,
+``k2 = 4 sigma^2 / ws^2 - 1``, ``k3 = 4 sigma^4 / g``. In both, ``sigma = 2 pi xi / (Td sqrt(1 - xi^2))``
+from a decay time Td and xi = sqrt(2)/2 (the PSINS toolbox's design), ws the Schuler frequency and
+R the earth radius.
+
+Stages (all times configurable):
+
+1. **level** (0 to ``shot_s``): fast third-order level loops in both channels, no azimuth loop.
+   The compass loop cannot start from any heading: at 180 deg the compass effect sin(az) W cos L
+   vanishes and its derivative has the wrong sign, so 180 deg is its unstable equilibrium (a
+   PSINS-style schedule from exactly 180 deg under seed 000's sway did not settle in 600 s). The
+   level loops, however, settle at any azimuth with steady commands that hold sin(az) and cos(az)
+   (eq. 19 of seed 000). From ``fit_from_s`` the least-squares form of eq. 19
+   (:class:`fusionbench.compass.AzimuthFit`) reads them, and at ``shot_s`` the attitude is turned
+   once by the azimuth found; the level integrators are shifted by the known change of the
+   earth-rate terms.
+2. **fast compass** (``shot_s`` to ``slow_s``): level loops with ``level_td_s[1]``, compass loop
+   with ``azimuth_td_s[0]``, pulling in the few-degree residual.
+3. **slow compass** (``slow_s`` to the end): ``level_td_s[2]`` and ``azimuth_td_s[1]``, narrow bands
+   that filter the sway and velocity noise.
+
+The reported attitude is the loop's own (the classical method); its limits are those of any
+stationary alignment.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusionbench import earth
+from fusionbench.aligner import AlignmentResult, Site, initial_attitude
+from fusionbench.compass import AzimuthFit, CommandLoop, check_compass_latitude, correct_azimuth, level_guess
+
+
+def sigma_of(td, xi):
+    """Decay rate sigma (1/s) of a loop with decay time td (s) and damping ratio xi."""
+    return 2 * np.pi * xi / (td * np.sqrt(1 - xi**2))
+
+
+def level_gains(td, xi, ws2, g):
+    """Third-order level-loop gains (k1 1/s, k2 dimensionless, k3 rad/s per m/s per s)."""
+    s = sigma_of(td, xi)
+    return 3 * s, s**2 * (2 + 1 / xi**2) / ws2 - 1, s**3 / (g * xi**2)
+
+
+def compass_gains(td, xi, ws2, g):
+    """Compass-loop gains (k1, k2, k3, k4) for the double pole pair s^2 + 2 sigma s + 2 sigma^2.
+
+    ``xi`` only sets sigma: the pole pair itself has damping sqrt(2)/2.
+    """
+    s = sigma_of(td, xi)
+    return 2 * s, 4 * s**2 / ws2 - 1, 4 * s**4 / g, 2 * s
+
+
+class PIDGyrocompass:
+    """Classical gyrocompass (method ``pid``): third-order level loops and a compass loop, staged.
+
+    Parameters
+    ----------
+    period : float
+        Control period, s.
+    xi : float
+        Damping ratio of the design (sqrt(2)/2).
+    level_td_s : tuple of 3 floats
+        Level-loop decay times in the level, fast-compass and slow-compass stages, s.
+    azimuth_td_s : tuple of 2 floats
+        Compass-loop decay times in the fast and slow stages, s.
+    fit_from_s, shot_s, slow_s : float
+        Start of the azimuth fit, time of the one-shot azimuth correction, start of the slow stage, s.
+    """
+
+    name = "pid"
+    description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
+    min_duration_s = 60.0
+
+    def __init__(self, period=0.1, xi=np.sqrt(2) / 2, level_td_s=(10.0, 20.0, 50.0), azimuth_td_s=(40.0, 100.0),
+                 fit_from_s=10.0, shot_s=40.0, slow_s=120.0):
+        self.period, self.xi = float(period), float(xi)
+        self.level_td_s, self.azimuth_td_s = tuple(level_td_s), tuple(azimuth_td_s)
+        self.fit_from_s, self.shot_s, self.slow_s = fit_from_s, shot_s, slow_s
+
+    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
+        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
+        check_compass_latitude(site.lat, self.name)
+        if imu.duration < self.min_duration_s:
+            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
+        C0 = initial_attitude(init, imu.runs)
+        loop = CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, self.period, vref)
+        h, R, g = loop.period, loop.R, site.g
+        rm, rn = earth.radii(site.lat)
+        radius = np.sqrt(rm * rn) + site.h
+        ws2 = g / radius
+        wN = earth.OMEGA_IE * np.cos(site.lat)
+        fit = AzimuthFit(R, h, site.lat, g)
+        fit_from = int(round(self.fit_from_s / h))
+        shot_step = max(int(round(self.shot_s / h)), fit_from + 4)
+        slow_step = int(round(self.slow_s / h))
+        J = np.zeros((R, 2))        # integral terms [of w_cE (north channel), of w_cN (east channel)], rad/s
+        x_az = np.zeros(R)          # compass-loop filter state, m/s*s
+        damp = np.zeros((R, 2))     # velocity removed by the damping terms so far, [E, N], m/s
+        cmd = np.zeros((R, 3))
+        hist_t = np.empty(loop.steps)
+        hist_C = np.empty((R, loop.steps, 3, 3))
+        az_shot = np.full(R, np.nan)
+        for j, t, dv in loop:
+            if j >= fit_from and j <= shot_step:
+                fit.add(dv[:, :2] + damp, cmd[:, :2])
+            if j == shot_step:
+                az_shot = fit.azimuth()
+                loop.sd.state.C_bn[:] = correct_azimuth(loop.sd.state.C_bn, az_shot)
+                J[:, 0] -= wN * np.sin(az_shot)
+                J[:, 1] += wN * (1.0 - np.cos(az_shot))
+            stage = 0 if j < shot_step else (1 if j < slow_step else 2)
+            k1, k2, k3 = level_gains(self.level_td_s[stage], self.xi, ws2, g)
+            vE, vN = dv[:, 0], dv[:, 1]
+            # east channel: third-order level loop in every stage
+            J[:, 1] += k3 * vE * h
+            w_cN = (1 + k2) * vE / radius + J[:, 1]
+            dE = k1 * vE * h
+            if stage == 0:
+                J[:, 0] += k3 * vN * h
+                w_cE = -(1 + k2) * vN / radius - J[:, 0]
+                w_cU = np.zeros(R)
+                dN = k1 * vN * h
+            else:
+                c1, c2, c3, c4 = compass_gains(self.azimuth_td_s[stage - 1], self.xi, ws2, g)
+                x_az += (vN - c4 * x_az) * h
+                w_cE = -(1 + c2) * vN / radius
+                w_cU = c3 / wN * x_az
+                dN = c1 * vN * h
+            loop.sd.state.v_n[:, 0] -= dE
+            loop.sd.state.v_n[:, 1] -= dN
+            damp += np.stack([dE, dN], axis=-1)
+            cmd = np.stack([w_cE, w_cN, w_cU], axis=-1)
+            loop.omega_c = cmd
+            hist_t[j] = t
+            hist_C[:, j] = loop.sd.state.C_bn
+        return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot})

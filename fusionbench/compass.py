@@ -1,0 +1,233 @@
+"""Shared machinery of gyrocompass-type aligners: the closed loop around the strapdown, the azimuth
+read from steady level commands (seed 000, eq. 19), and the one-shot azimuth correction (eqs. 17-18).
+
+A gyrocompass drives the computed navigation frame n' with commanded angular rates ``omega_c``
+(rad/s, ENU, resolved in n') so that the velocity errors vanish. On a stationary base with the
+level channels steady and no azimuth command, the Euler platform error angles
+``alpha = [ax, ay, az]`` (see :mod:`fusionbench.attitude`) obey (seed 000, eqs. 14-15 with the
+level coupling kept)::
+
+    ax' = -sin(az) wN + ay wU - epsE + w_cE = 0
+    ay' = (1 - cos(az)) wN - ax wU - epsN + w_cN = 0
+
+with ``wN = OMEGA_IE cos L`` and ``wU = OMEGA_IE sin L``, so that (eq. 19)::
+
+    sin(az) = (w_cE + ay wU - epsE) / wN
+    cos(az) = 1 + (w_cN - ax wU - epsN) / wN
+
+The unknown gyro biases are taken as zero, which leaves the azimuth limit -epsE / wN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import earth
+from .attitude import euler_to_dcm
+from .strapdown import NavState, Strapdown
+
+#: Gyrocompasses lose the compass effect toward the poles (wN = OMEGA_IE cos L -> 0).
+MAX_LATITUDE_DEG = 80.0
+
+
+def check_compass_latitude(lat, method):
+    """Raise ValueError (one line) when |lat| (rad) exceeds MAX_LATITUDE_DEG."""
+    if abs(np.degrees(lat)) > MAX_LATITUDE_DEG:
+        raise ValueError(f"latitude: {method} needs |latitude| <= {MAX_LATITUDE_DEG:g} deg (the horizontal earth "
+                         f"rate vanishes toward the poles), found {np.degrees(lat):.3f} deg")
+
+
+def azimuth_from_commands(w_cE, w_cN, alpha_x, alpha_y, lat, eps_E=0.0, eps_N=0.0):
+    """Azimuth error az (rad, in (-pi, pi]) from level commands, eq. (19).
+
+    Parameters
+    ----------
+    w_cE, w_cN : array_like
+        Steady commanded rates about east and north, rad/s.
+    alpha_x, alpha_y : array_like
+        Level error estimates (Euler platform angles about east and north), rad.
+    lat : float
+        Latitude, rad.
+    eps_E, eps_N : array_like, optional
+        Gyro bias estimates, rad/s (unknown in practice: 0).
+    """
+    wN = earth.OMEGA_IE * np.cos(lat)
+    wU = earth.OMEGA_IE * np.sin(lat)
+    s = (np.asarray(w_cE) + np.asarray(alpha_y) * wU - eps_E) / wN
+    c = 1.0 + (np.asarray(w_cN) - np.asarray(alpha_x) * wU - eps_N) / wN
+    return np.arctan2(s, c)
+
+
+class AzimuthFit:
+    """Least-squares form of eq. (19): the azimuth error from the level channels over the whole record.
+
+    With the level loops closed (small level errors ax, ay) the level velocity errors of a
+    stationary strapdown obey (seed 000, eqs. 12-15 with the level coupling, plus the strapdown's
+    Coriolis terms)::
+
+        dvN' =  g ax + nabN - 2 wU dvE,   ax' = -sin(az) wN + ay wU - epsE + w_cE
+        dvE' = -g ay + nabE + 2 wU dvN,   ay' = (1 - cos(az)) wN - ax wU - epsN + w_cN
+
+    Eq. 19 reads sin(az) and cos(az) off the steady commands. Here the level angles in the coupling
+    terms are replaced by the velocity equations (``g ay wU = wU (nabE - dvE' + ...)``), which turns
+    them into integrals of the measured velocity; and az(t) = az0 - A(t), where A is the azimuth
+    turned so far by the aligner itself (one-shot corrections, azimuth commands), known exactly.
+    With S = sin(az0), C = cos(az0), P and Q the double integrals of cos A and sin A, D_E and D_N
+    those of the commands and V the integrals of the velocity errors, the signals::
+
+        yN = dvN + 3 wU V_E - g D_E                  = c0N + c1N tau - gwN (S P - C Q) + bN tau^2
+        yE = dvE - 3 wU V_N + g D_N + g wN tau^2 / 2 = c0E + c1E tau + gwN (C P + S Q) + bE tau^2
+
+    are linear in [c0N, c1N, c0E, c1E, S, C] but for the bias terms b (gyro and accelerometer
+    biases: -g epsE/2 + wU nabE/2, ...), which cannot be told apart from S and C on a stationary
+    base and so stay in them: the azimuth limit -epsE / wN + tan L nabE / g. The least-squares
+    solution over the growing window gives az0 = atan2(S, C) from any heading, without waiting for
+    the loops to be steady, and keeps every sample's information across the aligner's own
+    corrections. Velocity corrections a loop applies itself (a classical damping term) must be added
+    back to the velocity it passes in (terms of order wU^2 are neglected).
+
+    Parameters
+    ----------
+    runs : int
+        Batch size.
+    h : float
+        Control period, s (one ``add`` per period).
+    lat : float
+        Latitude, rad.
+    g : float
+        Gravity, m/s^2.
+    """
+
+    _SCALE = 100.0  # time unit of the fit, s (keeps the normal equations well conditioned)
+
+    def __init__(self, runs, h, lat, g):
+        self.h, self.lat, self.g = float(h), float(lat), float(g)
+        self.wN = earth.OMEGA_IE * np.cos(lat)
+        self.wU = earth.OMEGA_IE * np.sin(lat)
+        self.R = runs
+        self.n = 0
+        self.A = np.zeros(runs)            # azimuth turned by the aligner so far, rad
+        self.I = np.zeros((runs, 4))       # integrals of [w_cE, w_cN, cos A, sin A]
+        self.D = np.zeros((runs, 4))       # double integrals of the same
+        self.V = np.zeros((runs, 2))       # integrals of [dvE, dvN] (coupling and Coriolis terms)
+        self._prev_dv = None
+        self.M = np.zeros((runs, 6, 6))    # normal matrix
+        self.b = np.zeros((runs, 6))
+
+    def turned(self, angle):
+        """Record that the aligner turned its attitude by ``angle`` (R,) rad about up, C <- Rz(angle) C
+        (an azimuth command w_cU over dt turns it by -w_cU dt)."""
+        self.A = self.A + angle
+
+    def add(self, dv_en, w_c_en):
+        """Add one period.
+
+        Parameters
+        ----------
+        dv_en : ndarray, shape (R, 2)
+            Velocity errors [dvE, dvN] at the end of the period, m/s.
+        w_c_en : ndarray, shape (R, 2)
+            Commands [w_cE, w_cN] applied during the period, rad/s.
+        """
+        h = self.h
+        if self.n:
+            rate = np.stack([w_c_en[:, 0], w_c_en[:, 1], np.cos(self.A), np.sin(self.A)], axis=-1)
+            self.D += self.I * h + 0.5 * rate * h * h
+            self.I += rate * h
+            self.V += 0.5 * (self._prev_dv + dv_en) * h
+        self._prev_dv = dv_en.copy()
+        tau = self.n * h / self._SCALE
+        g, k = self.g, self.g * self.wN * self._SCALE**2
+        P, Q = self.D[:, 2] / self._SCALE**2, self.D[:, 3] / self._SCALE**2
+        cross = 3.0 * self.wU * self.V  # level coupling (1x) and Coriolis (2x) terms, integrated
+        yN = dv_en[:, 1] + cross[:, 0] - g * self.D[:, 0]
+        yE = dv_en[:, 0] - cross[:, 1] + g * self.D[:, 1] + 0.5 * g * self.wN * (self.n * h) ** 2
+        one, zero = np.ones(self.R), np.zeros(self.R)
+        xN = np.stack([one, tau * one, zero, zero, -k * P, k * Q], axis=-1)
+        xE = np.stack([zero, zero, one, tau * one, k * Q, k * P], axis=-1)
+        self.M += xN[:, :, None] * xN[:, None, :] + xE[:, :, None] * xE[:, None, :]
+        self.b += xN * yN[:, None] + xE * yE[:, None]
+        self.n += 1
+
+    def initial_azimuth(self):
+        """az0 (R,) rad: the azimuth error at the window start, or NaN before 4 samples."""
+        if self.n < 4:
+            return np.full(self.R, np.nan)
+        theta = np.linalg.solve(self.M, self.b[..., None])[..., 0]
+        return np.arctan2(theta[:, 4], theta[:, 5])
+
+    def azimuth(self):
+        """The azimuth error now, az0 - A (R,) rad."""
+        return np.angle(np.exp(1j * (self.initial_azimuth() - self.A)))
+
+
+def correct_azimuth(C_bn, alpha_z):
+    """Attitude after removing an azimuth error alpha_z (rad), eqs. (17-18).
+
+    The computed frame n' is the true n turned by alpha_z about up, so ``C_bn = Rz(alpha_z) C_bn'``
+    (the rotation acts on the navigation side; the paper's right-hand product coincides with it
+    only for a level body).
+    """
+    a = np.asarray(alpha_z, dtype=float)
+    Rz = euler_to_dcm(np.stack([np.zeros_like(a), np.zeros_like(a), a], axis=-1))
+    return Rz @ C_bn
+
+
+def level_guess(imu, seconds=1.0):
+    """C_bn guess (R, 3, 3) levelled from the mean specific force of the first ``seconds``, yaw 0.
+
+    Pitch = asin(f_y / |f|), roll = atan2(-f_x, f_z) for C_bn = Rz(yaw) Rx(pitch) Ry(roll).
+    """
+    t, _, dv = imu.increments()
+    n = max(1, int(round(seconds / imu.dt)))
+    f = dv[:, :n].sum(axis=1)
+    f = f / np.linalg.norm(f, axis=-1, keepdims=True)
+    pitch = np.arcsin(np.clip(f[:, 1], -1, 1))
+    roll = np.arctan2(-f[:, 0], f[:, 2])
+    return euler_to_dcm(np.stack([pitch, roll, np.zeros_like(pitch)], axis=-1))
+
+
+class CommandLoop:
+    """Strapdown on a stationary base, stepped one control period at a time with commanded rates.
+
+    Parameters
+    ----------
+    imu : IMUData
+        The recordings (R runs).
+    site : Site
+        Position (held fixed).
+    C0 : ndarray, shape (R, 3, 3)
+        Initial attitude.
+    period : float
+        Control period, s; rounded to a whole number of samples.
+    vref : ndarray, shape (R, M, 3), optional
+        Reference velocity (ENU, m/s) at the end of each increment interval; zero if None. The
+        samples of each control period are averaged (the base is stationary, so this only filters
+        the reference's noise).
+
+    Iterate over the loop: each step integrates one period with the current command and yields
+    ``(j, t, dv)``: step index, time (s) and velocity error (R, 3) m/s against the reference.
+    Set :attr:`omega_c` (R, 3) rad/s before the next step; the attitude and velocity are in
+    :attr:`sd` (``sd.state.C_bn``, ``sd.state.v_n``) and may be corrected between steps.
+    """
+
+    def __init__(self, imu, site, C0, period, vref=None):
+        self.t, self.dth, self.dv = imu.increments()
+        self.R = self.dth.shape[0]
+        self.m = max(1, int(round(period / imu.dt)))
+        self.period = self.m * imu.dt
+        self.steps = self.t.size // self.m
+        self.vref = vref
+        state = NavState.broadcast(self.R, C0, lat=site.lat, lon=site.lon, h=site.h)
+        self.sd = Strapdown(state, imu.dt, position_fixed=True)
+        self.omega_c = np.zeros((self.R, 3))
+
+    def __iter__(self):
+        m = self.m
+        for j in range(self.steps):
+            k0, k1 = j * m, (j + 1) * m
+            self.sd.run(self.dth[:, k0:k1], self.dv[:, k0:k1], omega_cmd=self.omega_c, record_every=m)
+            dv = self.sd.state.v_n
+            if self.vref is not None:  # the reference's samples of the period, averaged (static base)
+                dv = dv - self.vref[:, k0:k1].mean(axis=1)
+            yield j, self.t[k1 - 1], dv
