@@ -64,7 +64,6 @@ class ADRCGyrocompass:
 
     name = "adrc"
     description = "ADRC gyrocompass (seed 000): TD/ESO/NLSEF level loops, azimuth from steady commands (eq. 19)"
-    min_duration_s = 60.0
 
     def __init__(self, h=0.02, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  r1=None, c1=0.8, h1=None, fit_from_s=10.0, shot_s=40.0, refine=True):
@@ -80,6 +79,7 @@ class ADRCGyrocompass:
         self.c1 = c1
         self.h1 = 10 * h if h1 is None else h1
         self.fit_from_s, self.shot_s, self.refine = fit_from_s, shot_s, refine
+        self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
@@ -100,6 +100,8 @@ class ADRCGyrocompass:
         hist_C = np.empty((R, loop.steps, 3, 3))
         hist_az = np.full((R, loop.steps), np.nan)
         az_shot = np.full(R, np.nan)
+        az = np.full(R, np.nan)
+        every = max(1, int(round(0.1 / h)))  # the azimuth estimate is refreshed at 10 Hz
         for j, t, dv in loop:
             applied = np.stack([u[:, 1], u[:, 0]], axis=-1)  # [w_cE, w_cN] used during this period
             v1, v2 = td.update(0.0)
@@ -108,7 +110,9 @@ class ADRCGyrocompass:
             C_out = loop.sd.state.C_bn
             if j >= fit_from:
                 fit.add(dv[:, :2], applied)
-                hist_az[:, j] = az = fit.azimuth()
+                if j == shot_step or (j - fit_from) % every == 0:
+                    az = fit.azimuth()
+                hist_az[:, j] = az
                 if j == shot_step:
                     az_shot = az
                 if j >= shot_step:  # eqs. 17-18 on the reported attitude

@@ -19,7 +19,8 @@ R the earth radius.
 
 Stages (all times configurable):
 
-1. **level** (0 to ``shot_s``): fast third-order level loops in both channels, no azimuth loop.
+1. **level** (until the first compass stage): fast third-order level loops in both channels, no
+   azimuth loop.
    The compass loop cannot start from any heading: at 180 deg the compass effect sin(az) W cos L
    vanishes and its derivative has the wrong sign, so 180 deg is its unstable equilibrium (a
    PSINS-style schedule from exactly 180 deg under seed 000's sway did not settle in 600 s). The
@@ -27,11 +28,13 @@ Stages (all times configurable):
    (eq. 19 of seed 000). From ``fit_from_s`` the least-squares form of eq. 19
    (:class:`fusionbench.compass.AzimuthFit`) reads them, and at ``shot_s`` the attitude is turned
    once by the azimuth found; the level integrators are shifted by the known change of the
-   earth-rate terms.
-2. **fast compass** (``shot_s`` to ``slow_s``): level loops with ``level_td_s[1]``, compass loop
-   with ``azimuth_td_s[0]``, pulling in the few-degree residual.
-3. **slow compass** (``slow_s`` to the end): ``level_td_s[2]`` and ``azimuth_td_s[1]``, narrow bands
-   that filter the sway and velocity noise.
+   earth-rate terms. Turning the computed frame flips its level errors, so the fast level loops
+   run on for a while before the compass loop starts: the compass loop reads any level transient
+   as an azimuth error (its gain from tilt to azimuth is about sigma / (W cos L), a thousand), and
+   would throw the azimuth degrees off.
+2. **compass stages** (``compass_stages``, from ``shot_s`` on): the north channel becomes the
+   compass loop, first fast to pull in the residual of the shot, then slower and slower so that the
+   narrow bands filter the sway, the velocity noise and the gyro noise.
 
 The reported attitude is the loop's own (the classical method); its limits are those of any
 stationary alignment.
@@ -75,23 +78,27 @@ class PIDGyrocompass:
         Control period, s.
     xi : float
         Damping ratio of the design (sqrt(2)/2).
-    level_td_s : tuple of 3 floats
-        Level-loop decay times in the level, fast-compass and slow-compass stages, s.
-    azimuth_td_s : tuple of 2 floats
-        Compass-loop decay times in the fast and slow stages, s.
-    fit_from_s, shot_s, slow_s : float
-        Start of the azimuth fit, time of the one-shot azimuth correction, start of the slow stage, s.
+    fit_from_s, shot_s : float
+        Start of the azimuth fit and time of the one-shot azimuth correction, s.
+    level_td_s : float
+        Level-loop decay time of the level stage (until the first compass stage), s.
+    compass_stages : sequence of (start_s, level_td_s, azimuth_td_s)
+        The compass stages: from each start time (s, after the shot) on, the level and compass decay
+        times (s). Narrower loops later filter more noise; switching keeps the loop states.
     """
 
     name = "pid"
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
-    min_duration_s = 60.0
-
-    def __init__(self, period=0.1, xi=np.sqrt(2) / 2, level_td_s=(10.0, 20.0, 50.0), azimuth_td_s=(40.0, 100.0),
-                 fit_from_s=10.0, shot_s=40.0, slow_s=120.0):
+    def __init__(self, period=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
+                 compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0))):
         self.period, self.xi = float(period), float(xi)
-        self.level_td_s, self.azimuth_td_s = tuple(level_td_s), tuple(azimuth_td_s)
-        self.fit_from_s, self.shot_s, self.slow_s = fit_from_s, shot_s, slow_s
+        self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
+        self.compass_stages = tuple(tuple(float(x) for x in st) for st in compass_stages)
+        self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
+        starts = [st[0] for st in self.compass_stages]
+        if not self.compass_stages or starts != sorted(starts):
+            raise ValueError(f"compass_stages: expected (start_s, level_td_s, azimuth_td_s) in increasing start order, "
+                             f"found {compass_stages}")
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
@@ -108,7 +115,7 @@ class PIDGyrocompass:
         fit = AzimuthFit(R, h, site.lat, g)
         fit_from = int(round(self.fit_from_s / h))
         shot_step = max(int(round(self.shot_s / h)), fit_from + 4)
-        slow_step = int(round(self.slow_s / h))
+        stage_steps = [max(shot_step + 1, int(round(st[0] / h))) for st in self.compass_stages]
         J = np.zeros((R, 2))        # integral terms [of w_cE (north channel), of w_cN (east channel)], rad/s
         x_az = np.zeros(R)          # compass-loop filter state, m/s*s
         damp = np.zeros((R, 2))     # velocity removed by the damping terms so far, [E, N], m/s
@@ -124,8 +131,9 @@ class PIDGyrocompass:
                 loop.sd.state.C_bn[:] = correct_azimuth(loop.sd.state.C_bn, az_shot)
                 J[:, 0] -= wN * np.sin(az_shot)
                 J[:, 1] += wN * (1.0 - np.cos(az_shot))
-            stage = 0 if j < shot_step else (1 if j < slow_step else 2)
-            k1, k2, k3 = level_gains(self.level_td_s[stage], self.xi, ws2, g)
+            stage = int(np.searchsorted(stage_steps, j, side="right"))
+            level_td = self.level_td_s if stage == 0 else self.compass_stages[stage - 1][1]
+            k1, k2, k3 = level_gains(level_td, self.xi, ws2, g)
             vE, vN = dv[:, 0], dv[:, 1]
             # east channel: third-order level loop in every stage
             J[:, 1] += k3 * vE * h
@@ -137,7 +145,7 @@ class PIDGyrocompass:
                 w_cU = np.zeros(R)
                 dN = k1 * vN * h
             else:
-                c1, c2, c3, c4 = compass_gains(self.azimuth_td_s[stage - 1], self.xi, ws2, g)
+                c1, c2, c3, c4 = compass_gains(self.compass_stages[stage - 1][2], self.xi, ws2, g)
                 x_az += (vN - c4 * x_az) * h
                 w_cE = -(1 + c2) * vN / radius
                 w_cU = c3 / wN * x_az

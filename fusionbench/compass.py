@@ -111,8 +111,9 @@ class AzimuthFit:
         self.D = np.zeros((runs, 4))       # double integrals of the same
         self.V = np.zeros((runs, 2))       # integrals of [dvE, dvN] (coupling and Coriolis terms)
         self._prev_dv = None
-        self.M = np.zeros((runs, 6, 6))    # normal matrix
-        self.b = np.zeros((runs, 6))
+        self.t_sums = np.zeros(3)          # sums of tau^0, tau^1, tau^2
+        # per-run sums: P, tau P, Q, tau Q, P^2, Q^2, P Q, yN, tau yN, yE, tau yE, P yN, Q yN, P yE, Q yE
+        self.sums = np.zeros((runs, 15))
 
     def turned(self, angle):
         """Record that the aligner turned its attitude by ``angle`` (R,) rad about up, C <- Rz(angle) C
@@ -131,29 +132,49 @@ class AzimuthFit:
         """
         h = self.h
         if self.n:
-            rate = np.stack([w_c_en[:, 0], w_c_en[:, 1], np.cos(self.A), np.sin(self.A)], axis=-1)
+            rate = np.empty((self.R, 4))
+            rate[:, :2] = w_c_en
+            rate[:, 2] = np.cos(self.A)
+            rate[:, 3] = np.sin(self.A)
             self.D += self.I * h + 0.5 * rate * h * h
             self.I += rate * h
             self.V += 0.5 * (self._prev_dv + dv_en) * h
         self._prev_dv = dv_en.copy()
         tau = self.n * h / self._SCALE
-        g, k = self.g, self.g * self.wN * self._SCALE**2
+        g = self.g
         P, Q = self.D[:, 2] / self._SCALE**2, self.D[:, 3] / self._SCALE**2
         cross = 3.0 * self.wU * self.V  # level coupling (1x) and Coriolis (2x) terms, integrated
         yN = dv_en[:, 1] + cross[:, 0] - g * self.D[:, 0]
         yE = dv_en[:, 0] - cross[:, 1] + g * self.D[:, 1] + 0.5 * g * self.wN * (self.n * h) ** 2
-        one, zero = np.ones(self.R), np.zeros(self.R)
-        xN = np.stack([one, tau * one, zero, zero, -k * P, k * Q], axis=-1)
-        xE = np.stack([zero, zero, one, tau * one, k * Q, k * P], axis=-1)
-        self.M += xN[:, :, None] * xN[:, None, :] + xE[:, :, None] * xE[:, None, :]
-        self.b += xN * yN[:, None] + xE * yE[:, None]
+        self.t_sums += (1.0, tau, tau * tau)
+        self.sums += np.stack([P, tau * P, Q, tau * Q, P * P, Q * Q, P * Q, yN, tau * yN, yE, tau * yE,
+                               P * yN, Q * yN, P * yE, Q * yE], axis=-1)
         self.n += 1
 
     def initial_azimuth(self):
         """az0 (R,) rad: the azimuth error at the window start, or NaN before 4 samples."""
         if self.n < 4:
             return np.full(self.R, np.nan)
-        theta = np.linalg.solve(self.M, self.b[..., None])[..., 0]
+        k = self.g * self.wN * self._SCALE**2
+        s0, s1, s2 = self.t_sums
+        P, tP, Q, tQ, PP, QQ, PQ, yN, tyN, yE, tyE, PyN, QyN, PyE, QyE = np.moveaxis(self.sums, -1, 0)
+        # rows of xN = [1, tau, 0, 0, -k P, k Q] and xE = [0, 0, 1, tau, k Q, k P], summed products
+        M = np.zeros((self.R, 6, 6))
+        M[:, 0, 0] = M[:, 2, 2] = s0
+        M[:, 0, 1] = M[:, 1, 0] = M[:, 2, 3] = M[:, 3, 2] = s1
+        M[:, 1, 1] = M[:, 3, 3] = s2
+        M[:, 0, 4] = M[:, 4, 0] = -k * P
+        M[:, 0, 5] = M[:, 5, 0] = k * Q
+        M[:, 1, 4] = M[:, 4, 1] = -k * tP
+        M[:, 1, 5] = M[:, 5, 1] = k * tQ
+        M[:, 2, 4] = M[:, 4, 2] = k * Q
+        M[:, 2, 5] = M[:, 5, 2] = k * P
+        M[:, 3, 4] = M[:, 4, 3] = k * tQ
+        M[:, 3, 5] = M[:, 5, 3] = k * tP
+        M[:, 4, 4] = M[:, 5, 5] = k * k * (PP + QQ)
+        M[:, 4, 5] = M[:, 5, 4] = 0.0  # -k^2 P Q + k^2 Q P
+        b = np.stack([yN, tyN, yE, tyE, k * (QyE - PyN), k * (QyN + PyE)], axis=-1)
+        theta = np.linalg.solve(M, b[..., None])[..., 0]
         return np.arctan2(theta[:, 4], theta[:, 5])
 
     def azimuth(self):
@@ -166,11 +187,15 @@ def correct_azimuth(C_bn, alpha_z):
 
     The computed frame n' is the true n turned by alpha_z about up, so ``C_bn = Rz(alpha_z) C_bn'``
     (the rotation acts on the navigation side; the paper's right-hand product coincides with it
-    only for a level body).
+    only for a level body). Batched: ``C_bn`` (..., 3, 3), ``alpha_z`` broadcast to (...).
     """
-    a = np.asarray(alpha_z, dtype=float)
-    Rz = euler_to_dcm(np.stack([np.zeros_like(a), np.zeros_like(a), a], axis=-1))
-    return Rz @ C_bn
+    C = np.asarray(C_bn, dtype=float)
+    a = np.asarray(alpha_z, dtype=float)[..., None]
+    c, s = np.cos(a), np.sin(a)
+    out = C.copy()
+    out[..., 0, :] = c * C[..., 0, :] - s * C[..., 1, :]
+    out[..., 1, :] = s * C[..., 0, :] + c * C[..., 1, :]
+    return out
 
 
 def level_guess(imu, seconds=1.0):

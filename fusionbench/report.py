@@ -57,6 +57,57 @@ def error_figure(out, path):
     _save_png(fig, path)
 
 
+def azimuth_figure(out, path):
+    """Azimuth error vs time for every method (Monte Carlo mean and 1 sigma), whole record and
+    zoomed from the scenario's ``zoom_from_s`` (like seed 000's Figs. 3 and 4); limit dashed."""
+    fig, (full, zoom) = plt.subplots(2, 1, figsize=(8, 7))
+    lim = out.limits[2] / units.ARCMIN
+    t0 = out.scenario.zoom_from_s
+    for name, oc in out.outcomes.items():
+        u = oc.phi[..., 2] / units.ARCMIN
+        mean, std = u.mean(axis=0), u.std(axis=0)
+        (line,) = full.plot(oc.t, mean, label=name)
+        full.fill_between(oc.t, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+        sel = oc.t >= t0
+        zoom.plot(oc.t[sel], mean[sel], color=line.get_color(), label=name)
+        zoom.fill_between(oc.t[sel], (mean - std)[sel], (mean + std)[sel], color=line.get_color(), alpha=0.2)
+    band = out.scenario.settling_band_arcmin
+    for ax in (full, zoom):
+        ax.axhline(lim, color="k", ls="--", lw=1, label="limit")
+        ax.set_ylabel("phiU (arcmin)")
+        ax.grid(alpha=0.3)
+    full.set_yscale("symlog", linthresh=max(1.0, 2 * band))
+    zoom.axhspan(lim - band, lim + band, color="k", alpha=0.06, label=f"limit +- {band:g} arcmin")
+    zoom.set_xlabel("time (s)")
+    full.legend(loc="upper right", fontsize=8)
+    zoom.legend(loc="upper right", fontsize=8)
+    full.set_title(f"{out.metrics['scenario']}: azimuth error (mean and 1-sigma, {out.metrics['runs']} runs); "
+                   f"below: from {t0:g} s")
+    fig.tight_layout()
+    _save_png(fig, path)
+
+
+def _paper_section(out):
+    paper = out.scenario.paper
+    if not paper:
+        return ""
+    lines = [f"## Beside the paper ({paper.get('reference', 'source paper')})", ""]
+    claims = paper.get("settling_time_s", {})
+    if claims:
+        band = out.scenario.settling_band_arcmin
+        lines += [f"| method | paper: azimuth settles in (s) | here: mean (max) settling in a {band:g} arcmin band (s) "
+                  "| final phiU rms (arcmin) |", "|---|---|---|---|"]
+        for name, r in out.metrics["methods"].items():
+            st = r["settling_time_s"]["U"]
+            base = out.scenario.variants.get(name, {}).get("method", name)
+            lines.append(f"| {name} | {claims.get(base, '-')} | {st['mean']:.0f} ({st['max_abs']:.0f}) "
+                         f"| {r['final_error_arcmin']['U']['rms']:.2f} |")
+        lines.append("")
+    if paper.get("note"):
+        lines += [paper["note"].strip(), ""]
+    return "\n".join(lines)
+
+
 def _table(m):
     lim = m["limits_arcmin"]
     rows = ["| method | phiE mean (std) | phiN mean (std) | phiU mean (std) | phiU rms | settling U (s, band "
@@ -80,6 +131,9 @@ def write_scenario_report(out, folder):
     scn = out.scenario
     fig_name = "errors.png"
     error_figure(out, folder / fig_name)
+    azimuth_figure(out, folder / "azimuth.png")
+    level = "\n".join(f"| {n} | {r['level_rms_last_100s_arcmin']['E']:.3f} | {r['level_rms_last_100s_arcmin']['N']:.3f} |"
+                      for n, r in m["methods"].items())
     methods_desc = "\n".join(f"- `{n}`: {oc.description}" for n, oc in out.outcomes.items())
     text = f"""# {m['scenario']}
 
@@ -98,8 +152,17 @@ azimuth = -east gyro bias / (earth rate cos L) + tan L east accelerometer bias /
 Methods:
 {methods_desc}
 
+Level errors over the last 100 s, RMS over runs and time (arcmin):
+
+| method | phiE | phiN |
+|---|---|---|
+{level}
+
 ![misalignment vs time]({fig_name})
 
+![azimuth error vs time](azimuth.png)
+
+{_paper_section(out)}
 Reproduce: `fusionbench run {m['scenario']} --runs {m['runs']} --seed {m['seed']}{' --quick' if m['quick'] else ''}`
 """
     write_metrics(folder / "metrics.json", m)

@@ -19,11 +19,12 @@ from tqdm import tqdm
 
 from . import imu as imu_mod
 from . import metrics, units
-from .aligner import load_method
 from .io import atomic_open
 
 #: Longest history kept per method for figures (points).
 HISTORY_POINTS = 400
+#: Window of the level-error RMS figure at the end of the record, s.
+LEVEL_WINDOW_S = 100.0
 #: Memory budget of one batch of IMU samples, bytes.
 BATCH_BYTES = 200e6
 
@@ -66,13 +67,15 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
     init = scn.initial_guess(traj.truth([data.t0]).C_bn[0])
     out = {}
     for name in method_names:
-        method = load_method(name)
+        method = scn.method(name)
         t0 = time.perf_counter()
         res = method.align(data, scn.site, vref=vref, init=init)
         wall = time.perf_counter() - t0
         phi = metrics.misalignment_history(res.C_bn, traj.truth(res.t).C_bn)
         t_h, phi_h = _decimate(res.t, phi)
-        out[name] = (method.description, t_h, phi_h, phi[:, -1], wall, res.t)
+        last = res.t >= res.t[-1] - LEVEL_WINDOW_S
+        level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
+        out[name] = (method.description, t_h, phi_h, phi[:, -1], wall, level_ms)
     return out
 
 
@@ -104,7 +107,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     """
     methods = list(methods or scn.methods)
     for m in methods:  # fail early, with the method's own message
-        load_method(m)
+        scn.method(m)
     duration, default_runs = scn.sized(quick)
     runs = default_runs if runs is None else int(runs)
     if runs < 1:
@@ -138,8 +141,9 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         desc, t_h = parts[0][0], parts[0][1]
         phi_h = np.concatenate([p[2] for p in parts])
         phi_end = np.concatenate([p[3] for p in parts])
+        level_ms = np.concatenate([p[5] for p in parts])
         outcomes[name] = MethodOutcome(name, desc, t_h, phi_h, sum(p[4] for p in parts),
-                                       {"phi_end": phi_end})
+                                       {"phi_end": phi_end, "level_ms": level_ms})
     return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits)
 
 
@@ -164,6 +168,8 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
             "wall_s": float(oc.wall_s),
             "final_minus_limit_arcmin": {ax: float(np.mean(phi_end[:, i]) - limits[i] / units.ARCMIN)
                                          for i, ax in enumerate("ENU")},
+            "level_rms_last_100s_arcmin": {ax: float(np.sqrt(oc.extra["level_ms"][:, i].mean()) / units.ARCMIN)
+                                           for i, ax in enumerate("EN")},
         }
     return out
 

@@ -42,9 +42,19 @@ Format (angles in degrees, times in s, sensor figures in the customary units nam
     sigma_mps = 0.0
     schedule = []
     [init]
-    misalignment_deg = [3, 3, 180]   # initial guess exp(-[phi x]) C_true; absent: method initialises
+    misalignment_deg = [3, 3, 180]   # initial guess: Euler platform error angles [ax, ay, az] of
+                                     # seed 000 (C_bn' = C_n^n'(alpha) C_bn; = phi when small);
+                                     # absent: the method initialises itself
     [metrics]
     settling_band_arcmin = 1.0
+    zoom_from_s = 100.0         # start of the zoomed azimuth figure
+    [variants.adrc-h1-4s]       # a method with options, usable in `methods` by its name
+    method = "adrc"
+    h1 = 4.0
+    [paper]                     # what the source paper reports, shown beside our figures
+    reference = "seed 000"
+    settling_time_s = {pid = 420, adrc = 250}
+    note = "markdown text for the report"
 """
 
 from __future__ import annotations
@@ -57,10 +67,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import attitude, imu, trajectory, units
-from ..aligner import Site
+from ..aligner import Site, load_method
 
 _TOP = {"name", "description", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
-        "motion", "imu", "vref", "init", "metrics"}
+        "motion", "imu", "vref", "init", "metrics", "variants", "paper"}
 _SECTIONS = {
     "quick": {"duration_s", "runs"},
     "site": {"lat_deg", "lon_deg", "height_m"},
@@ -71,7 +81,8 @@ _SECTIONS = {
             "accel_bias_ug", "accel_bias_sigma_ug", "vrw_ug_rthz", "accel_scale_ppm"},
     "vref": {"sigma_mps", "schedule"},
     "init": {"misalignment_deg"},
-    "metrics": {"settling_band_arcmin"},
+    "metrics": {"settling_band_arcmin", "zoom_from_s"},
+    "paper": {"reference", "note", "settling_time_s"},
 }
 
 
@@ -114,6 +125,9 @@ class Scenario:
     vref_spec: imu.VelocityReferenceSpec
     init_misalignment: tuple | None
     settling_band_arcmin: float
+    variants: dict = field(default_factory=dict)
+    paper: dict = field(default_factory=dict)
+    zoom_from_s: float = 100.0
     source: str = ""
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -135,7 +149,15 @@ class Scenario:
         """Initial attitude guess (3, 3) from the prescribed misalignment, or None."""
         if self.init_misalignment is None:
             return None
-        return attitude.apply_misalignment(C_bn_true, np.radians(self.init_misalignment))
+        C_n_nprime = attitude.euler_platform_to_dcm(np.radians(self.init_misalignment))
+        return C_n_nprime @ C_bn_true
+
+    def method(self, name):
+        """Instantiate a method by scenario variant name, registered name or ``module:Class`` path."""
+        if name in self.variants:
+            options = dict(self.variants[name])
+            return load_method(options.pop("method"), **options)
+        return load_method(name)
 
 
 def _where(src, key):
@@ -258,8 +280,14 @@ def parse(data: dict, src: str = "<scenario>") -> Scenario:
     init = data.get("init", {})
     mis = _vec(init, "misalignment_deg", f"{src} [init]") if "misalignment_deg" in init else None
     band = _num(data.get("metrics", {}), "settling_band_arcmin", f"{src} [metrics]", 1.0, 1e-6, 1e4)
+    zoom = _num(data.get("metrics", {}), "zoom_from_s", f"{src} [metrics]", 100.0, 0.0, duration)
+    variants = data.get("variants", {})
+    for vname, opts in variants.items():
+        if not isinstance(opts, dict) or not isinstance(opts.get("method"), str):
+            raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
+    paper = data.get("paper", {})
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
-                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, src, data)
+                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, src, data)
 
 
 def load(path) -> Scenario:

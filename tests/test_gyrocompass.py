@@ -1,0 +1,137 @@
+"""Gyrocompass family (seed 000): eq. 19 azimuth, ADRC and PID gyrocompasses from any heading."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from adrc.gyrocompass import ADRCGyrocompass
+from baselines.gyrocompass import PIDGyrocompass
+from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
+from fusionbench.aligner import Site
+from fusionbench.compass import AzimuthFit, azimuth_from_commands, correct_azimuth
+from fusionbench.imu import PRESETS, IMUSpec, simulate
+from fusionbench.io import write_csv
+
+D = np.pi / 180
+
+
+@pytest.mark.parametrize("az_deg", [180.0, -179.0, 90.0, 3.0, -120.0])
+def test_eq19_recovers_the_azimuth_from_steady_commands(az_deg):
+    lat, az, ax, ay = 34 * D, az_deg * D, 2e-4, -3e-4
+    wN, wU = earth.OMEGA_IE * np.cos(lat), earth.OMEGA_IE * np.sin(lat)
+    # steady state of eqs. 14-15 with the level coupling: ax' = ay' = 0
+    w_cE = np.sin(az) * wN - ay * wU
+    w_cN = -(1 - np.cos(az)) * wN + ax * wU
+    assert azimuth_from_commands(w_cE, w_cN, ax, ay, lat) == pytest.approx(az, abs=1e-12)
+
+
+def test_azimuth_fit_recovers_the_initial_azimuth_across_its_own_corrections():
+    # level channels of a stationary strapdown (seed 000 eqs. 12-15 with coupling, plus Coriolis):
+    #   ax' = -sin(az) wN + ay wU + w_cE,  ay' = (1 - cos az) wN - ax wU + w_cN
+    #   dvN' = g ax - 2 wU dvE,            dvE' = -g ay + 2 wU dvN
+    lat, g, h = -45 * D, 9.8, 0.1
+    wN, wU = earth.OMEGA_IE * np.cos(lat), earth.OMEGA_IE * np.sin(lat)
+    az0 = np.array([179.0, -100.0, 5.0]) * D
+    turn = np.array([170.0, -90.0, 10.0]) * D
+    fit = AzimuthFit(3, h, lat, g)
+    rng = np.random.default_rng(0)
+    x = np.tile([3e-4, -2e-4, 0.0, 0.0], (3, 1))  # [ax, ay, dvE, dvN]
+    A = np.zeros(3)
+    w = np.zeros((3, 2))
+
+    def rate(x, az, w):
+        ax, ay, vE, vN = x.T
+        return np.stack([-np.sin(az) * wN + ay * wU + w[:, 0], (1 - np.cos(az)) * wN - ax * wU + w[:, 1],
+                         -g * ay + 2 * wU * vN, g * ax - 2 * wU * vE], -1)
+
+    for k in range(3000):
+        fit.add(x[:, 2:], w)  # velocities now, commands of the period that just ended
+        if k == 1000:  # the aligner turns its azimuth by a known angle (level errors kept)
+            fit.turned(turn)
+            A = A + turn
+        # known commands for the next period: a level loop (wn 0.3 rad/s, damping 0.7) keeps the
+        # velocity errors at the centimetre level, as in an aligner, plus arbitrary excitation
+        ax, ay, vE, vN = x.T
+        w = np.stack([-0.42 * ax - 0.09 / g * vN, -0.42 * ay + 0.09 / g * vE], -1) + rng.normal(0, 2e-6, (3, 2))
+        for _ in range(10):  # RK4 over the period
+            dt, az = h / 10, az0 - A
+            k1 = rate(x, az, w)
+            k2 = rate(x + dt / 2 * k1, az, w)
+            k3 = rate(x + dt / 2 * k2, az, w)
+            k4 = rate(x + dt * k3, az, w)
+            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    err = np.angle(np.exp(1j * (fit.initial_azimuth() - az0)))
+    # exact but for the neglected wU^2 terms: well under an arcsecond with the loops closed
+    assert err == pytest.approx(np.zeros(3), abs=units.ARCSEC)
+
+
+def test_correct_azimuth_is_a_left_rotation_about_up():
+    C = attitude.euler_to_dcm([0.1, -0.2, 0.7])
+    Rz = attitude.euler_to_dcm([0.0, 0.0, 0.4])
+    assert correct_azimuth(C, 0.4) == pytest.approx(Rz @ C, abs=1e-15)
+
+
+def _batch(lat_deg, spec, duration):
+    lat = lat_deg * D
+    tr = tj.Trajectory(lat, 0.5, 100.0, tj.EulerSway(mean=(1 * D, -2 * D, -70 * D)), duration=duration)
+    data = simulate(tr, spec, 0.01, runs=3, seed=1)
+    C0 = tr.truth([0.0]).C_bn[0]
+    init = np.stack([attitude.euler_platform_to_dcm(np.radians([2.0, -2.0, a])) @ C0 for a in (180.0, -179.0, 90.0)])
+    return tr, data, init, Site(lat, 0.5, 100.0)
+
+
+@pytest.mark.parametrize("lat_deg", [34.0, -45.0])
+@pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass])
+def test_noise_free_biased_data_lands_on_the_limits_from_any_heading(method, lat_deg):
+    spec = PRESETS["seed000"].noise_free()  # constant biases and scale factors only
+    tr, data, init, site = _batch(lat_deg, spec, 300.0)
+    res = method().align(data, site, init=init)
+    C_end = tr.truth([tr.duration]).C_bn[0]
+    phi = attitude.misalignment(res.C_bn_final, C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, site.lat, site.h)
+    assert phi == pytest.approx(np.broadcast_to(lim, phi.shape), rel=0.05)
+
+
+@pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass])
+def test_with_zero_sensor_errors_the_azimuth_is_recovered_within_half_an_arcminute(method):
+    tr, data, init, site = _batch(34.0, IMUSpec(), 200.0)
+    res = method().align(data, site, init=init)
+    phi = attitude.misalignment(res.C_bn_final, tr.truth([tr.duration]).C_bn[0])
+    assert np.abs(phi[:, 2]).max() < 0.5 * units.ARCMIN
+    assert np.abs(phi[:, :2]).max() < 0.05 * units.ARCMIN
+
+
+@pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass])
+def test_polar_latitudes_are_refused(method):
+    tr, data, _, _ = _batch(34.0, IMUSpec(), 100.0)
+    with pytest.raises(ValueError, match="latitude.*80"):
+        method().align(data, Site.from_degrees(81.0))
+
+
+def test_paper000_scenario_starts_from_the_papers_euler_platform_angles():
+    scn = scenarios.get("paper000-large-misalignment")
+    C = attitude.euler_to_dcm([0.1, 0.05, 0.3])
+    guess = scn.initial_guess(C)
+    assert np.degrees(attitude.euler_platform_angles(guess, C)) == pytest.approx([3.0, 3.0, 180.0], abs=1e-9)
+    assert "adrc-h1-4s" in scn.methods and scn.method("adrc-h1-4s").h1 == 4.0
+    assert scn.vref_spec.sigma == (0.05, 0.05, 0.05)
+
+
+@pytest.mark.parametrize("method,heading", [("pid", 200.0), ("adrc", -179.0)])
+def test_cli_aligns_a_written_csv_from_any_heading(tmp_path, method, heading):
+    lat = 34 * D
+    tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(1 * D, 2 * D, -heading * D)), duration=200.0)
+    spec = PRESETS["seed000"].noise_free()
+    path = write_csv(tmp_path / "rec.csv", simulate(tr, spec, 0.01))
+    r = subprocess.run([sys.executable, "-m", "fusionbench", "align", str(path), "--lat", "34", "--method", method,
+                        "--json"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    C_end = tr.truth([out["t_end"]]).C_bn[0]
+    phi = attitude.misalignment(np.array(out["C_bn"]), C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, lat, 0.0)
+    assert phi == pytest.approx(lim, abs=0.1 * units.ARCMIN)
+    assert out["heading_deg"] == pytest.approx(heading % 360, abs=0.1)
