@@ -68,6 +68,10 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
     out = {}
     for name in method_names:
         method = scn.method(name)
+        desc = method.description
+        if name in scn.variants:
+            opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
+            desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
         t0 = time.perf_counter()
         res = method.align(data, scn.site, vref=vref, init=init)
         wall = time.perf_counter() - t0
@@ -75,7 +79,7 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
         t_h, phi_h = _decimate(res.t, phi)
         last = res.t >= res.t[-1] - LEVEL_WINDOW_S
         level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-        out[name] = (method.description, t_h, phi_h, phi[:, -1], wall, level_ms)
+        out[name] = (desc, t_h, phi_h, phi[:, -1], wall, level_ms)
     return out
 
 
