@@ -68,18 +68,21 @@ class ADRCGyrocompass:
     def __init__(self, h=0.02, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  r1=None, c1=0.8, h1=None, fit_from_s=10.0, shot_s=40.0, refine=True):
         self.h = float(h)
-        self.c0 = c0
-        self.r0 = 1.0 / h**2 if r0 is None else r0
-        self.h0 = h if h0 is None else h0
-        self.beta01 = 1.0 / h if beta01 is None else beta01
-        self.beta02 = 1.0 / (3 * h**2) if beta02 is None else beta02
-        self.beta03 = 1.0 / (18**2 * h**3) if beta03 is None else beta03
-        self.delta = delta
-        self.r1 = 1.0 / h if r1 is None else r1
-        self.c1 = c1
-        self.h1 = 10 * h if h1 is None else h1
+        self.c0, self.c1, self.delta = c0, c1, delta
+        self._given = {"r0": r0, "h0": h0, "beta01": beta01, "beta02": beta02, "beta03": beta03, "r1": r1, "h1": h1}
+        for name, value in self.gains(self.h).items():
+            setattr(self, name, value)
         self.fit_from_s, self.shot_s, self.refine = fit_from_s, shot_s, refine
         self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
+
+    def gains(self, h):
+        """The step-dependent parameters for step ``h`` (s): the paper's formulas in h where not given.
+
+        A recording sampled more slowly than ``self.h`` runs the ADRC at its own sample interval,
+        and the defaults follow that step (1/h, 1/(3 h^2), ... are stable only for the step used)."""
+        defaults = {"r0": 1.0 / h**2, "h0": h, "beta01": 1.0 / h, "beta02": 1.0 / (3 * h**2),
+                    "beta03": 1.0 / (18**2 * h**3), "r1": 1.0 / h, "h1": 10 * h}
+        return {k: (defaults[k] if v is None else v) for k, v in self._given.items()}
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
@@ -89,9 +92,10 @@ class ADRCGyrocompass:
         C0 = initial_attitude(init, imu.runs)
         loop = CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, self.h, vref)
         h, R, g = loop.period, loop.R, site.g
+        k = self.gains(h)
         b0 = np.array([-g, g])  # channels: [east (drives w_cN), north (drives w_cE)]
-        td = TrackingDifferentiator((R, 2), h, self.r0, self.h0, self.c0)
-        eso = ExtendedStateObserver((R, 2), h, self.beta01, self.beta02, self.beta03, self.delta, b0)
+        td = TrackingDifferentiator((R, 2), h, k["r0"], k["h0"], self.c0)
+        eso = ExtendedStateObserver((R, 2), h, k["beta01"], k["beta02"], k["beta03"], self.delta, b0)
         u = np.zeros((R, 2))
         fit = AzimuthFit(R, h, site.lat, g)
         fit_from = int(round(self.fit_from_s / h))
@@ -106,7 +110,7 @@ class ADRCGyrocompass:
             applied = np.stack([u[:, 1], u[:, 0]], axis=-1)  # [w_cE, w_cN] used during this period
             v1, v2 = td.update(0.0)
             z1, z2, z3 = eso.update(dv[:, :2], u)
-            u = nlsef(v1 - z1, v2 - z2, z3, b0, self.r1, self.h1, self.c1)
+            u = nlsef(v1 - z1, v2 - z2, z3, b0, k["r1"], k["h1"], self.c1)
             C_out = loop.sd.state.C_bn
             if j >= fit_from:
                 fit.add(dv[:, :2], applied)

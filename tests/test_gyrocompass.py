@@ -135,3 +135,22 @@ def test_cli_aligns_a_written_csv_from_any_heading(tmp_path, method, heading):
     lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, lat, 0.0)
     assert phi == pytest.approx(lim, abs=0.1 * units.ARCMIN)
     assert out["heading_deg"] == pytest.approx(heading % 360, abs=0.1)
+
+
+@pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass])
+def test_noisy_pyins_recording_at_10_hz_lands_on_the_limits_within_the_noise(method):
+    # someone else's simulator, another sample rate (the ADRC runs at the 0.1 s sample interval and
+    # its step-dependent defaults follow), a heading of 75 deg found without any initial guess
+    from fusionbench.imudata import IMUData
+    from tests.conftest import load_fixture
+
+    t, gyro, accel, meta = load_fixture("pyins_static_40n_noisy")
+    imu = IMUData(t, gyro[None], accel[None], "rate")
+    site = Site.from_degrees(meta["lat_deg"], meta["lon_deg"], meta["height_m"])
+    C = np.array(meta["C_bn_last"])
+    phi = attitude.misalignment(method().align(imu, site).C_bn_final[0], C)
+    lim = metrics.theoretical_limits(meta["gyro_bias_body_rad_s"], meta["accel_bias_body_m_s2"], C, site.lat, site.h)
+    # azimuth noise of the gyro random walk over the ~280 s the azimuth is read: ARW / (W cos L sqrt T)
+    sigma_az = 0.005 * units.DEG_PER_SQRT_H / (earth.OMEGA_IE * np.cos(site.lat) * np.sqrt(280.0))
+    assert abs(phi[2] - lim[2]) < 3 * sigma_az
+    assert np.abs(phi[:2] - lim[:2]).max() < 0.05 * units.ARCMIN
