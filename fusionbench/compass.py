@@ -237,12 +237,18 @@ class CommandLoop:
     """
 
     def __init__(self, imu, site, C0, period, vref=None):
-        self.t, self.dth, self.dv = imu.increments()
-        self.R = self.dth.shape[0]
-        self.m = max(1, int(round(period / imu.dt)))
-        self.period = self.m * imu.dt
-        self.steps = self.t.size // self.m
-        self.vref = vref
+        self.t, dth, dv = imu.increments()
+        self.R = dth.shape[0]
+        self.m = m = max(1, int(round(period / imu.dt)))
+        self.period = m * imu.dt
+        self.steps = steps = self.t.size // m
+        # one contiguous block per control period: (steps, R, m, 3), so no step copies its slice
+        self.dth = np.ascontiguousarray(dth[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
+        self.dv = np.ascontiguousarray(dv[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
+        self.vref = None
+        if vref is not None:
+            vref = np.asarray(vref, dtype=float)
+            self.vref = vref[:, :steps * m].reshape(self.R, steps, m, 3).mean(axis=2).swapaxes(0, 1).copy()
         state = NavState.broadcast(self.R, C0, lat=site.lat, lon=site.lon, h=site.h)
         self.sd = Strapdown(state, imu.dt, position_fixed=True)
         self.omega_c = np.zeros((self.R, 3))
@@ -250,9 +256,8 @@ class CommandLoop:
     def __iter__(self):
         m = self.m
         for j in range(self.steps):
-            k0, k1 = j * m, (j + 1) * m
-            self.sd.run(self.dth[:, k0:k1], self.dv[:, k0:k1], omega_cmd=self.omega_c, record_every=m)
+            self.sd.run(self.dth[j], self.dv[j], omega_cmd=self.omega_c, record_every=m)
             dv = self.sd.state.v_n
             if self.vref is not None:  # the reference's samples of the period, averaged (static base)
-                dv = dv - self.vref[:, k0:k1].mean(axis=1)
-            yield j, self.t[k1 - 1], dv
+                dv = dv - self.vref[j]
+            yield j, self.t[(j + 1) * m - 1], dv

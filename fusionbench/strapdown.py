@@ -284,10 +284,11 @@ def _rodrigues3(x, y, z, out):
     out[2, 1] = a * x + b * y * z
 
 
-@numba.njit(cache=True, parallel=True)
-def _integrate_numba(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
+def _integrate_kernel(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
                      position_fixed, height_fixed, record_every, out_C, out_v, out_p):
-    """Compiled engine: the same arithmetic as :func:`_integrate_numpy`, one run at a time."""
+    """Compiled engine: the same arithmetic as :func:`_integrate_numpy`, one run at a time.
+
+    Compiled twice (below): serial, and with the run loop spread over threads (``prange``)."""
     runs, n = dtheta.shape[0], dtheta.shape[1]
     has_cmd = cmd.shape[1] > 0
     for r in numba.prange(runs):  # runs are independent: one thread each, results bit-identical
@@ -372,3 +373,18 @@ def _integrate_numba(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, 
         lat0[r], lon0[r], h0[r] = lat, lon, h
         th_prev[r, 0], th_prev[r, 1], th_prev[r, 2] = a0, a1, a2
         dv_prev[r, 0], dv_prev[r, 1], dv_prev[r, 2] = u0, u1, u2
+
+
+_integrate_serial = numba.njit(cache=True)(_integrate_kernel)
+_integrate_parallel = numba.njit(cache=True, parallel=True)(_integrate_kernel)
+#: Batches smaller than this (runs x samples) run serially: waking threads for a control loop's tiny
+#: steps costs more than it saves, and spinning threads hurt badly on a busy machine.
+PARALLEL_MIN_WORK = 20000
+
+
+def _integrate_numba(*args):
+    runs, n = args[8].shape[0], args[8].shape[1]
+    if runs > 1 and runs * n >= PARALLEL_MIN_WORK:
+        _integrate_parallel(*args)
+    else:
+        _integrate_serial(*args)
