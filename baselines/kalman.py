@@ -1,0 +1,261 @@
+"""Kalman fine alignment (filterpy) and its innovation-adaptive variant.
+
+After a coarse alignment (or from the scenario's initial guess), the shared strapdown runs on the
+IMU increments and an error-state filter, one :class:`filterpy.kalman.KalmanFilter` per run, estimates
+at ``rate_hz``::
+
+    x = [phiE, phiN, phiU, dvE, dvN, eps_x, eps_y, eps_z, nab_x, nab_y, nab_z]
+
+(misalignment phi in ENU with C_est = (I - [phi x]) C_true, rad; horizontal velocity error, m/s;
+gyro and accelerometer biases in the body frame, rad/s and m/s^2), with the psi-angle model::
+
+    phi' = -[w_in x] phi - C_bn eps + w_g
+    dv'  =  [f^n x] phi + C_bn nab - [(2 w_ie + w_en) x] dv + w_a      (east and north rows)
+
+the transition and process noise accumulated over the update interval (second-order expansion of
+exp(F T) and of the Van Loan integral), and the measurement z = v_INS - v_ref (ENU, m/s; zero
+velocity on a stationary base). The update is filterpy's Joseph form; z is passed as a column vector
+(filterpy 2 broadcasts a 1-D z silently). After each update the estimate is fed back: the attitude is
+turned by phi (C <- exp([phi x]) C), the velocity error removed, the biases added to the
+compensation of later increments, and those states reset to zero (their covariance is unchanged).
+
+Stationary-base limits: the filter cannot separate the horizontal accelerometer biases from tilt nor
+the east gyro bias from azimuth, so it lands on :func:`fusionbench.metrics.theoretical_limits`.
+
+:class:`AdaptiveKalmanAligner` (``akf``) adds innovation-based adaptation for noise that changes:
+Sage-Husa estimation of R with a fading factor, and covariance matching of the innovations to inflate
+the predicted covariance when they exceed what P and R explain (a stand-in for a Q that grew).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from fusionbench import earth
+from fusionbench.aligner import AlignmentResult, Site, initial_attitude
+from fusionbench.attitude import rotvec_to_dcm
+from fusionbench.imu import PRESETS, IMUSpec
+from fusionbench.strapdown import NavState, Strapdown
+
+from .coarse import InertialCoarseAligner
+
+NX = 11
+
+
+def _skew(v):
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def error_model(C_bn, f_n, w_in, w_cor):
+    """Continuous error-state matrix F (R, 11, 11) of the psi-angle model (module docstring).
+
+    Parameters
+    ----------
+    C_bn : (R, 3, 3) attitude. f_n : (R, 3) specific force in ENU, m/s^2.
+    w_in : (R, 3) navigation-frame rate, rad/s. w_cor : (R, 3) 2 w_ie + w_en, rad/s.
+    """
+    R = C_bn.shape[0]
+    F = np.zeros((R, NX, NX))
+    F[:, 0:3, 0:3] = -_skew(w_in)
+    F[:, 0:3, 5:8] = -C_bn
+    F[:, 3:5, 0:3] = _skew(f_n)[:, :2]
+    F[:, 3:5, 8:11] = C_bn[:, :2]
+    F[:, 3:5, 3:5] = -_skew(w_cor)[:, :2, :2]
+    return F
+
+
+def discretize(F, Qc, T):
+    """Second-order transition and process noise over T: Phi = I + F T + (F T)^2 / 2,
+    Qd = Qc T + (F Qc + Qc F^T) T^2 / 2 (batched over the leading axis)."""
+    FT = F * T
+    Phi = np.eye(F.shape[-1]) + FT + FT @ FT / 2
+    FQ = F @ Qc
+    return Phi, Qc * T + (FQ + np.swapaxes(FQ, -1, -2)) * T * T / 2
+
+
+class KalmanAligner:
+    """Kalman fine alignment (method ``kf``) on filterpy, feedback-corrected strapdown.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Filter rate, Hz (10).
+    imu : str or IMUSpec
+        Noise model of the filter: a preset name (``fusionbench.imu.PRESETS``) or an IMUSpec. Its
+        white noises give Q; its bias sigmas (fixed part taken as a sigma too) the initial bias
+        covariance, floored so that the prior is never tight (a tight gyro-bias prior biases the tilt).
+    vel_sigma : float
+        Standard deviation of the reference velocity (each update), m/s.
+    att_sigma_deg : (3,) float
+        Initial misalignment standard deviations [E, N, U] after the initialisation, deg.
+    coarse_s : float
+        Length of the inertial-frame coarse alignment when no initial guess is given, s.
+    """
+
+    name = "kf"
+    description = "Kalman fine alignment (filterpy, 11-state psi-angle model, feedback), coarse start"
+
+    def __init__(self, rate_hz=10.0, imu="seed000", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0):
+        self.rate_hz = float(rate_hz)
+        if isinstance(imu, str):
+            if imu not in PRESETS:
+                raise ValueError(f"imu: expected a preset name of {sorted(PRESETS)} or an IMUSpec, found {imu!r}")
+            imu = PRESETS[imu]
+        if not isinstance(imu, IMUSpec):
+            raise ValueError(f"imu: expected a preset name or an IMUSpec, found {type(imu).__name__}")
+        self.spec = imu
+        self.vel_sigma = float(vel_sigma)
+        self.att_sigma = np.radians(np.broadcast_to(np.asarray(att_sigma_deg, dtype=float), (3,)))
+        self.coarse_s = float(coarse_s)
+        self.min_duration_s = self.coarse_s + 10.0
+
+    # ---------------------------------------------------------------- noise model
+    def _qc(self):
+        g, a = self.spec.gyro, self.spec.accel
+        q = np.zeros(NX)
+        q[0:3] = np.square(g.white)
+        q[3:5] = np.square(a.white)[:2]
+        q[5:8] = np.square(g.random_walk) + 2 * np.square(g.instability) / g.tau
+        q[8:11] = np.square(a.random_walk) + 2 * np.square(a.instability) / a.tau
+        return q
+
+    def _p0(self):
+        g, a = self.spec.gyro, self.spec.accel
+        eps = np.hypot(np.hypot(g.bias, g.bias_sigma), g.instability)
+        nab = np.hypot(np.hypot(a.bias, a.bias_sigma), a.instability)
+        # floors: 0.01 deg/h and 10 ug, so that a zero datasheet figure does not freeze the state
+        eps = np.maximum(eps, 0.01 * np.pi / 180 / 3600)
+        nab = np.maximum(nab, 10e-6 * 9.80665)
+        return np.concatenate([self.att_sigma, [0.1, 0.1], eps, nab]) ** 2
+
+    def _new_filter(self, P0):
+        kf = KalmanFilter(dim_x=NX, dim_z=2)
+        kf.P = np.diag(P0)
+        kf.H = np.zeros((2, NX))
+        kf.H[0, 3] = kf.H[1, 4] = 1.0
+        kf.R = np.eye(2) * self.vel_sigma**2
+        return kf
+
+    def _update(self, kf, z, k):
+        """One measurement update (overridden by the adaptive variant)."""
+        kf.update(z)
+
+    # ---------------------------------------------------------------- alignment
+    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
+        """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None)."""
+        if abs(np.degrees(site.lat)) > 89.0:
+            raise ValueError(f"latitude: {self.name} needs |latitude| <= 89 deg, found {np.degrees(site.lat):.3f} deg")
+        if imu.duration < self.min_duration_s:
+            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
+        t, dth, dv = imu.increments()
+        R, N, _ = dth.shape
+        C0 = initial_attitude(init, R)
+        k0 = 0
+        hist_t, hist_C, hist_s = [], [], []
+        if C0 is None:  # coarse alignment on the first coarse_s seconds, then fine alignment from there
+            k0 = int(round(self.coarse_s / imu.dt))
+            coarse = InertialCoarseAligner(history_points=20).align(imu.__class__(t[:k0], dth[:, :k0], dv[:, :k0]), site)
+            C0 = coarse.C_bn_final
+            hist_t.append(coarse.t)
+            hist_C.append(coarse.C_bn)
+            hist_s.append(np.full(coarse.C_bn.shape[:2] + (3,), np.nan))
+        v0 = np.zeros((R, 3)) if vref is None else vref[:, max(k0 - 1, 0)]
+        sd = Strapdown(NavState.broadcast(R, C0, v0, site.lat, site.lon, site.h), imu.dt, height_fixed=True)
+        m = max(1, int(round(1.0 / (self.rate_hz * imu.dt))))
+        T = m * imu.dt
+        steps = (N - k0) // m
+        qc = self._qc()
+        P0 = self._p0()
+        filters = [self._new_filter(P0) for _ in range(R)]
+        eps_hat = np.zeros((R, 3))
+        nab_hat = np.zeros((R, 3))
+        out_t = np.empty(steps)
+        out_C = np.empty((R, steps, 3, 3))
+        out_s = np.empty((R, steps, 3))
+        for j in range(steps):
+            a, b = k0 + j * m, k0 + (j + 1) * m
+            g_in = dth[:, a:b] - eps_hat[:, None] * imu.dt
+            a_in = dv[:, a:b] - nab_hat[:, None] * imu.dt
+            C_prev = sd.state.C_bn.copy()
+            sd.run(g_in, a_in, record_every=m)
+            st = sd.state
+            f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
+            w_ie = earth.earth_rate_n(st.lat)
+            w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
+            F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en)
+            Qc = np.zeros((R, NX, NX))
+            Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
+            Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
+            Qc[:, 5:, 5:] = np.diag(qc[5:])
+            Phi, Qd = discretize(F, Qc, T)
+            z = st.v_n[:, :2] - (0.0 if vref is None else vref[:, b - 1, :2])
+            x = np.empty((R, NX))
+            for r, kf in enumerate(filters):
+                kf.predict(F=Phi[r], Q=Qd[r] * getattr(kf, "q_scale", 1.0))
+                self._update(kf, z[r][:, None], j)
+                x[r] = kf.x[:, 0]
+                kf.x[:] = 0.0  # feedback below resets every state
+                out_s[r, j] = np.sqrt(np.diag(kf.P)[:3])
+            st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
+            st.v_n[:, :2] -= x[:, 3:5]
+            eps_hat += x[:, 5:8]
+            nab_hat += x[:, 8:11]
+            out_t[j] = t[b - 1]
+            out_C[:, j] = st.C_bn
+        hist_t.append(out_t)
+        hist_C.append(out_C)
+        hist_s.append(out_s)
+        extra = {"sigma_phi": np.concatenate(hist_s, axis=1), "gyro_bias": eps_hat, "accel_bias": nab_hat}
+        return AlignmentResult(self.name, np.concatenate(hist_t), np.concatenate(hist_C, axis=1), extra)
+
+
+class AdaptiveKalmanAligner(KalmanAligner):
+    """Innovation-adaptive Kalman alignment (method ``akf``).
+
+    * R by Sage-Husa with fading factor ``b``: ``R_k = (1 - d_k) R_{k-1} + d_k (nu nu^T - H P^- H^T)``,
+      ``d_k = (1 - b) / (1 - b^(k+1))``, on the diagonal (the two channels' noises are independent;
+      the full form can turn R indefinite once floored), floored at ``r_floor`` times the nominal R.
+    * Q by covariance matching: over the last ``window`` updates the mean innovation covariance C
+      is compared with ``H P^- H^T + R``; the ratio ``tr(C - R) / tr(H P^- H^T)``, bounded to
+      [1, ``max_inflation``] and smoothed over the window, scales Q in the next predictions. (Scaling
+      P^- itself runs away here: the unobservable azimuth and bias directions grow without bound.)
+    """
+
+    name = "akf"
+    description = "innovation-adaptive Kalman alignment (Sage-Husa R, covariance-matched Q inflation)"
+
+    def __init__(self, b=0.98, window=50, r_floor=0.1, max_inflation=100.0, **kw):
+        super().__init__(**kw)
+        self.b, self.window, self.r_floor = float(b), int(window), float(r_floor)
+        self.max_inflation = float(max_inflation)
+
+    def _new_filter(self, P0):
+        kf = super()._new_filter(P0)
+        kf.innov = []
+        kf.R0 = kf.R.copy()
+        kf.q_scale = 1.0
+        return kf
+
+    def _update(self, kf, z, k):
+        HPH = kf.H @ kf.P @ kf.H.T
+        nu = z - kf.H @ kf.x
+        kf.innov.append(nu @ nu.T)
+        if len(kf.innov) > self.window:
+            kf.innov.pop(0)
+        # Sage-Husa R, per channel (a diagonal R stays positive definite once floored), floored at a
+        # fraction of the nominal R
+        d = (1 - self.b) / (1 - self.b ** (k + 1))
+        r = (1 - d) * np.diag(kf.R) + d * (nu[:, 0] ** 2 - np.diag(HPH))
+        kf.R = np.diag(np.maximum(r, self.r_floor * np.diag(kf.R0)))
+        # covariance matching: scale Q (for the next predictions) when the innovations exceed what
+        # H P^- H^T + R explain; smoothed and bounded, so that P cannot run away
+        if len(kf.innov) == self.window:
+            C = np.mean(kf.innov, axis=0)
+            lam = float(np.clip(np.trace(C - kf.R) / np.trace(HPH), 1.0, self.max_inflation))
+            kf.q_scale = (1 - 1.0 / self.window) * kf.q_scale + lam / self.window
+        kf.update(z)

@@ -1,0 +1,81 @@
+"""Kalman fine alignment (filterpy): limits, consistency over Monte Carlo runs, the CLI."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner, discretize, error_model
+from fusionbench import attitude, earth, metrics, trajectory as tj, units
+from fusionbench.aligner import Site
+from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.io import write_csv
+
+D = np.pi / 180
+LAT = 34 * D
+
+
+def static(heading_deg, duration):
+    return tj.Trajectory(LAT, 1.9, 450.0, tj.EulerSway(mean=(1 * D, -2 * D, -heading_deg * D)), duration=duration)
+
+
+def test_error_model_has_the_textbook_blocks():
+    C = attitude.euler_to_dcm([0.1, 0.2, 0.3])[None]
+    f = np.array([[0.0, 0.0, 9.8]])
+    w = earth.earth_rate_n(LAT)[None]
+    F = error_model(C, f, w, 2 * w)[0]
+    # dvE' = -g phiN, dvN' = +g phiE (f^n = [0, 0, g]); phi' = -C eps
+    assert F[3, 1] == pytest.approx(-9.8) and F[4, 0] == pytest.approx(9.8)
+    assert F[0:3, 5:8] == pytest.approx(-C[0])
+    # the discretisation matches exp(F T) to second order
+    from scipy.linalg import expm
+    Phi, _ = discretize(F[None], np.zeros((1, 11, 11)), 0.1)
+    assert Phi[0] == pytest.approx(expm(F * 0.1), abs=1e-6)
+
+
+@pytest.mark.parametrize("method", [KalmanAligner, AdaptiveKalmanAligner])
+@pytest.mark.parametrize("heading", [180.0, -179.0, 75.0])
+def test_noise_free_biased_data_lands_on_the_limits(method, heading):
+    # accelerometer biases of about 30 ug give level limits of about 0.1 arcmin
+    spec = IMUSpec(gyro=SensorErrors(bias=np.array([0.01, -0.015, 0.02]) * units.DEG_PER_H),
+                   accel=SensorErrors(bias=np.array([30.0, -25.0, 40.0]) * units.UG))
+    tr = static(heading, 240.0)
+    data = simulate(tr, spec, 0.01, runs=1)
+    res = method(vel_sigma=0.001).align(data, Site(LAT, 1.9, 450.0))  # coarse start, no guess
+    C_end = tr.truth([tr.duration]).C_bn[0]
+    phi = attitude.misalignment(res.C_bn_final[0], C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, LAT, 450.0)
+    assert phi == pytest.approx(lim, rel=0.05)
+
+
+def test_kalman_filter_is_consistent_over_50_monte_carlo_runs():
+    # biases drawn per run from the filter's own prior (seed 000's figures as sigmas), so that the
+    # actual error, unobservable bias part included, should match the predicted sigma
+    base = PRESETS["seed000"]
+    spec = IMUSpec(gyro=SensorErrors(bias_sigma=base.gyro.bias, white=base.gyro.white, scale=base.gyro.scale),
+                   accel=SensorErrors(bias_sigma=base.accel.bias, white=base.accel.white, scale=base.accel.scale))
+    tr = static(123.0, 200.0)
+    runs = 50
+    data = simulate(tr, spec, 0.01, runs=runs, seed=4)
+    vref = simulate_vref(tr, VelocityReferenceSpec((0.01,) * 3), data.t, runs=runs, seed=4)
+    res = KalmanAligner(imu=spec, vel_sigma=0.01).align(data, Site(LAT, 1.9, 450.0), vref=vref)
+    phi = attitude.misalignment(res.C_bn_final, tr.truth([tr.duration]).C_bn[0])
+    sigma = res.extra["sigma_phi"][:, -1]
+    ratio = np.sqrt(np.mean((phi / sigma) ** 2, axis=0))  # RMS of actual over predicted, per axis
+    assert np.all((ratio > 0.7) & (ratio < 1.5)), ratio
+
+
+def test_cli_aligns_a_written_csv_with_kf_from_any_heading(tmp_path):
+    spec = PRESETS["seed000"].noise_free()
+    tr = static(200.0, 200.0)
+    path = write_csv(tmp_path / "rec.csv", simulate(tr, spec, 0.01))
+    r = subprocess.run([sys.executable, "-m", "fusionbench", "align", str(path), "--lat", "34", "--height", "450",
+                        "--method", "kf", "--json"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    C_end = tr.truth([out["t_end"]]).C_bn[0]
+    phi = attitude.misalignment(np.array(out["C_bn"]), C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, LAT, 450.0)
+    assert phi == pytest.approx(lim, abs=0.2 * units.ARCMIN)
