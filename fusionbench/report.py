@@ -108,6 +108,30 @@ def _paper_section(out):
     return "\n".join(lines)
 
 
+def _jump_section(m):
+    rows = [(n, r["jump"]) for n, r in m["methods"].items() if "jump" in r]
+    if not rows:
+        return ""
+    a, b = rows[0][1]["window_s"]
+    lines = [f"## Noise jump ({a:g} s to {b:g} s)", "",
+             "Misalignment RMS over runs and time in each part of the record, peak |error| from the jump on, and "
+             "the time after the jump ends until phiU stays within the settling band of its final value "
+             "(arcmin, s):", "",
+             "| method | before E/N/U | during E/N/U | after E/N/U | peak E/N/U | re-converge (mean, max) |",
+             "|---|---|---|---|---|---|"]
+    fmt = lambda d: " / ".join(f"{d[ax]:.2f}" for ax in "ENU") if d else "-"  # noqa: E731
+    for n, j in rows:
+        r = j["rms_arcmin"]
+        lines.append(f"| {n} | {fmt(r.get('before'))} | {fmt(r.get('during'))} | {fmt(r.get('after'))} "
+                     f"| {fmt(j['peak_arcmin'])} | {j['reconverge_s']['mean']:.0f}, {j['reconverge_s']['max_abs']:.0f} |")
+    cons = [(n, r["consistency_rms_ratio"]) for n, r in m["methods"].items() if "consistency_rms_ratio" in r]
+    if cons:
+        lines += ["", "Filter consistency at the end: RMS over runs of the actual error over the predicted sigma "
+                  "(1 for a consistent filter):", "", "| method | E | N | U |", "|---|---|---|---|"]
+        lines += [f"| {n} | {c['E']:.2f} | {c['N']:.2f} | {c['U']:.2f} |" for n, c in cons]
+    return "\n".join(lines) + "\n"
+
+
 def _table(m):
     lim = m["limits_arcmin"]
     rows = ["| method | phiE mean (std) | phiN mean (std) | phiU mean (std) | phiU rms | settling U (s, band "
@@ -162,6 +186,7 @@ Level errors over the last 100 s, RMS over runs and time (arcmin):
 
 ![azimuth error vs time](azimuth.png)
 
+{_jump_section(m)}
 {_paper_section(out)}
 Reproduce: `fusionbench run {m['scenario']} --runs {m['runs']} --seed {m['seed']}{' --quick' if m['quick'] else ''}`
 """

@@ -79,7 +79,13 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
         t_h, phi_h = _decimate(res.t, phi)
         last = res.t >= res.t[-1] - LEVEL_WINDOW_S
         level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-        out[name] = (desc, t_h, phi_h, phi[:, -1], wall, level_ms)
+        extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1]}
+        if scn.jump_window_s is not None:
+            a, b = scn.jump_window_s
+            parts = {"before": res.t < a, "during": (res.t >= a) & (res.t < b), "after": res.t >= b}
+            extra["window_ms"] = {k: np.mean(phi[:, sel] ** 2, axis=1) for k, sel in parts.items() if sel.any()}
+            extra["peak"] = np.max(np.abs(phi[:, res.t >= a]), axis=1)
+        out[name] = (desc, t_h, phi_h, phi[:, -1], wall, extra)
     return out
 
 
@@ -145,9 +151,12 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         desc, t_h = parts[0][0], parts[0][1]
         phi_h = np.concatenate([p[2] for p in parts])
         phi_end = np.concatenate([p[3] for p in parts])
-        level_ms = np.concatenate([p[5] for p in parts])
-        outcomes[name] = MethodOutcome(name, desc, t_h, phi_h, sum(p[4] for p in parts),
-                                       {"phi_end": phi_end, "level_ms": level_ms})
+        extra = {"phi_end": phi_end}
+        for key in parts[0][5]:
+            val = parts[0][5][key]
+            extra[key] = ({k: np.concatenate([p[5][key][k] for p in parts]) for k in val} if isinstance(val, dict)
+                          else np.concatenate([p[5][key] for p in parts]))
+        outcomes[name] = MethodOutcome(name, desc, t_h, phi_h, sum(p[4] for p in parts), extra)
     return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits)
 
 
@@ -175,6 +184,21 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
             "level_rms_last_100s_arcmin": {ax: float(np.sqrt(oc.extra["level_ms"][:, i].mean()) / units.ARCMIN)
                                            for i, ax in enumerate("EN")},
         }
+        sig = oc.extra["sigma_end"]
+        if np.all(np.isfinite(sig)):  # filters: actual error over predicted sigma, RMS over runs
+            ratio = np.sqrt(np.mean((oc.extra["phi_end"] / sig) ** 2, axis=0))
+            out["methods"][name]["consistency_rms_ratio"] = {ax: float(ratio[i]) for i, ax in enumerate("ENU")}
+        if scn.jump_window_s is not None:
+            a, b = scn.jump_window_s
+            after = oc.t >= b
+            reconv = metrics.settling_time(oc.t[after], phi_u[:, after], band) - b
+            out["methods"][name]["jump"] = {
+                "window_s": [a, b],
+                "rms_arcmin": {k: {ax: float(np.sqrt(ms[:, i].mean()) / units.ARCMIN) for i, ax in enumerate("ENU")}
+                               for k, ms in oc.extra["window_ms"].items()},
+                "peak_arcmin": {ax: float(oc.extra["peak"][:, i].max() / units.ARCMIN) for i, ax in enumerate("ENU")},
+                "reconverge_s": metrics.stats(reconv),
+            }
     return out
 
 

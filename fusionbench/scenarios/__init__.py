@@ -48,6 +48,7 @@ Format (angles in degrees, times in s, sensor figures in the customary units nam
     [metrics]
     settling_band_arcmin = 1.0
     zoom_from_s = 100.0         # start of the zoomed azimuth figure
+    jump_window_s = [200, 400]  # a noise jump: error RMS before/during/after, peak, re-convergence
     [variants.adrc-h1-4s]       # a method with options, usable in `methods` by its name
     method = "adrc"
     h1 = 4.0
@@ -81,7 +82,7 @@ _SECTIONS = {
             "accel_bias_ug", "accel_bias_sigma_ug", "vrw_ug_rthz", "accel_scale_ppm"},
     "vref": {"sigma_mps", "schedule"},
     "init": {"misalignment_deg"},
-    "metrics": {"settling_band_arcmin", "zoom_from_s"},
+    "metrics": {"settling_band_arcmin", "zoom_from_s", "jump_window_s"},
     "paper": {"reference", "note", "settling_time_s"},
 }
 
@@ -128,6 +129,7 @@ class Scenario:
     variants: dict = field(default_factory=dict)
     paper: dict = field(default_factory=dict)
     zoom_from_s: float = 100.0
+    jump_window_s: tuple | None = None
     source: str = ""
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -281,13 +283,18 @@ def parse(data: dict, src: str = "<scenario>") -> Scenario:
     mis = _vec(init, "misalignment_deg", f"{src} [init]") if "misalignment_deg" in init else None
     band = _num(data.get("metrics", {}), "settling_band_arcmin", f"{src} [metrics]", 1.0, 1e-6, 1e4)
     zoom = _num(data.get("metrics", {}), "zoom_from_s", f"{src} [metrics]", 100.0, 0.0, duration)
+    jump = None
+    if "jump_window_s" in data.get("metrics", {}):
+        jump = _vec(data["metrics"], "jump_window_s", f"{src} [metrics]", n=2)
+        if not 0 < jump[0] < jump[1] < duration:
+            raise ScenarioError(f"{_where(src, 'metrics.jump_window_s')}: expected 0 < start < end < duration_s, found {jump}")
     variants = data.get("variants", {})
     for vname, opts in variants.items():
         if not isinstance(opts, dict) or not isinstance(opts.get("method"), str):
             raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
     paper = data.get("paper", {})
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
-                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, src, data)
+                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, src, data)
 
 
 def load(path) -> Scenario:
