@@ -1,0 +1,164 @@
+"""Factor-graph fine alignment (gtsam): the theoretical limits from any heading, the robust variant,
+calibrated marginals on noisy data, the command line and refused inputs."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner, keyframe_counts
+from fusionbench import attitude, earth, metrics, trajectory as tj, units
+from fusionbench.aligner import Aligner, Site
+from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.io import write_csv
+
+D = np.pi / 180
+LAT = 34 * D
+# level limits of about 0.1 arcmin (30 ug / g = 0.10 arcmin), an azimuth limit of 2.5 to 3 arcmin
+EPS = np.array([0.01, -0.02, 0.015]) * units.DEG_PER_H
+NAB = np.array([30.0, -25.0, 40.0]) * units.UG
+BIASED = IMUSpec(gyro=SensorErrors(bias=EPS), accel=SensorErrors(bias=NAB))
+
+
+def static(heading_deg, spec, duration, runs=1, seed=0):
+    tr = tj.Trajectory(LAT, 0.3, 50.0, tj.EulerSway(mean=(1 * D, -2 * D, -heading_deg * D)), duration=duration)
+    return tr, simulate(tr, spec, 0.01, runs=runs, seed=seed), Site(LAT, 0.3, 50.0)
+
+
+def final_error_and_limits(tr, res, spec, site):
+    C_end = tr.truth([res.t_end]).C_bn[0]
+    phi = attitude.misalignment(res.C_bn_final, C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, site.lat, site.h)
+    return phi, lim
+
+
+@pytest.fixture(scope="module")
+def noise_free_180():
+    tr, data, site = static(180.0, BIASED, 300.0)
+    return tr, data, site, FactorGraphAligner().align(data, site, init=_guess(tr))
+
+
+def _guess(tr):
+    # several degrees off: 2 and -2 deg level, 5 deg azimuth (Euler platform error angles)
+    return attitude.euler_platform_to_dcm(np.radians([2.0, -2.0, 5.0])) @ tr.truth([0.0]).C_bn[0]
+
+
+def test_is_an_aligner_with_keyframes_ending_at_the_last_sample(noise_free_180):
+    tr, data, site, res = noise_free_180
+    fg = FactorGraphAligner()
+    assert isinstance(fg, Aligner) and isinstance(RobustFactorGraphAligner(), Aligner)
+    assert (fg.name, RobustFactorGraphAligner.name) == ("gtsam", "gtsam-robust")
+    assert res.method == "gtsam" and res.t[0] == pytest.approx(0.0) and res.t_end == data.t[-1]
+    assert np.diff(res.t) == pytest.approx(np.ones(300))  # 1 s keyframes
+    assert res.C_bn.shape == (1, 301, 3, 3) and res.extra["sigma_phi"].shape == (1, 301, 3)
+    assert list(keyframe_counts(1049, 100)) == list(range(0, 1000, 100)) + [1049]  # short tail merged
+    assert list(keyframe_counts(1050, 100)) == list(range(0, 1100, 100)) + [1050]
+
+
+def test_noise_free_biased_data_lands_on_the_limits_from_180_deg(noise_free_180):
+    tr, data, site, res = noise_free_180
+    phi, lim = final_error_and_limits(tr, res, BIASED, site)
+    assert np.abs(lim[:2]).min() > 0.08 * units.ARCMIN and abs(lim[2]) > 2 * units.ARCMIN
+    assert phi[0] == pytest.approx(lim, rel=0.05)
+
+
+@pytest.mark.parametrize("heading,with_init", [(-179.0, True), (-179.0, False)])
+def test_noise_free_biased_data_lands_on_the_limits_from_any_start(heading, with_init):
+    tr, data, site = static(heading, BIASED, 120.0)
+    res = FactorGraphAligner(marginals=False).align(data, site, init=_guess(tr) if with_init else None)
+    phi, lim = final_error_and_limits(tr, res, BIASED, site)
+    assert phi[0] == pytest.approx(lim, rel=0.05)
+
+
+def test_a_guess_180_deg_off_still_lands_on_the_limits_and_a_stalled_solve_restarts_from_coarse():
+    tr, data, site = static(-179.0, BIASED, 120.0)
+    guess = attitude.euler_platform_to_dcm(np.radians([3.0, 3.0, 180.0])) @ tr.truth([0.0]).C_bn[0]
+    for fg in (FactorGraphAligner(marginals=False), FactorGraphAligner(marginals=False, max_iterations=10)):
+        res = fg.align(data, site, init=guess)
+        phi, lim = final_error_and_limits(tr, res, BIASED, site)
+        assert phi[0] == pytest.approx(lim, rel=0.05)
+        assert res.extra["restarted"][0] == (fg.max_iterations == 10)  # LM needs ~70 iterations from 180 deg
+
+
+def test_the_robust_variant_equals_the_plain_one_on_noise_free_data(noise_free_180):
+    tr, data, site, plain = noise_free_180
+    robust = RobustFactorGraphAligner(marginals=False).align(data, site, init=_guess(tr))
+    assert robust.method == "gtsam-robust"
+    phi_p, _ = final_error_and_limits(tr, plain, BIASED, site)
+    phi_r, _ = final_error_and_limits(tr, robust, BIASED, site)
+    assert phi_r == pytest.approx(phi_p, rel=0.01)
+
+
+def test_noisy_data_lands_within_three_predicted_sigmas_of_the_limits():
+    spec = PRESETS["seed000"]
+    tr, data, site = static(200.0, spec, 300.0, runs=3, seed=7)
+    res = FactorGraphAligner().align(data, site)
+    phi, lim = final_error_and_limits(tr, res, spec, site)
+    sig_noise = res.extra["sigma_phi_noise"][:, -1]
+    assert np.all(np.abs(phi - lim) < 3 * sig_noise)
+    # the noise-only sigmas: azimuth near the gyrocompass figure ARW / (W cos L sqrt T), level at
+    # the 0.03-arcmin level
+    arw_az = spec.gyro.white[0] / (earth.OMEGA_IE * np.cos(LAT) * np.sqrt(300.0))
+    assert sig_noise[:, 2] == pytest.approx(np.full(3, arw_az), rel=0.3)
+    assert np.all((sig_noise[:, :2] > 0.01 * units.ARCMIN) & (sig_noise[:, :2] < 0.1 * units.ARCMIN))
+    # the full marginal adds the unobservable parts that the bias priors leave:
+    # gyro_bias_sigma / (W cos L) in azimuth, accel_bias_sigma / g in level
+    fg = FactorGraphAligner()
+    unobs = np.array([fg.accel_bias_sigma / site.g, fg.accel_bias_sigma / site.g,
+                      fg.gyro_bias_sigma / (earth.OMEGA_IE * np.cos(LAT))])
+    assert res.extra["sigma_phi"][:, -1] == pytest.approx(np.sqrt(unobs**2 + sig_noise**2), rel=0.02)
+
+
+def test_a_perfect_imu_on_a_swaying_base_is_aligned_from_the_inertial_coarse_start():
+    sway = tj.EulerSway(mean=(0.5 * D, 1 * D, -30 * D), amplitude=(1 * D, 1.5 * D, 2 * D), frequency=(0.2, 0.1, 0.05))
+    tr = tj.Trajectory(LAT, 0.0, 0.0, sway, duration=200.0)
+    res = FactorGraphAligner(marginals=False).align(simulate(tr, IMUSpec(), 0.01), Site(LAT))
+    phi = attitude.misalignment(res.C_bn_final[0], tr.truth([200.0]).C_bn[0])
+    assert np.abs(phi).max() < 0.02 * units.ARCMIN  # 0.003 arcmin measured
+
+
+def test_a_moving_base_with_a_velocity_reference_is_aligned_through_the_transport_rate():
+    # 0.1 g along north-east from 50 s: 147 m/s and 11 km at the end; without the transport rate
+    # (and gtsam's centrifugal term of the position) the error would be several arcmin
+    tr = tj.accelerating(LAT, mean=(1 * D, -1 * D, -60 * D), accel=0.1 * 9.80665, start=50.0, duration=200.0,
+                         direction=(0.6, 0.8, 0.0))
+    data = simulate(tr, IMUSpec(), 0.01)
+    vref = simulate_vref(tr, VelocityReferenceSpec(), data.increments()[0])
+    res = FactorGraphAligner(marginals=False).align(data, Site(LAT), vref=vref, init=_guess(tr))
+    phi = attitude.misalignment(res.C_bn_final[0], tr.truth([200.0]).C_bn[0])
+    assert np.abs(phi).max() < 0.02 * units.ARCMIN
+    assert res.extra["passes"][0] == 2  # the 5-deg guess moved: compensation redone with the solution
+
+
+def test_cli_aligns_a_written_csv_from_200_deg(tmp_path):
+    tr = tj.Trajectory(LAT, 0.0, 0.0, tj.EulerSway(mean=(1 * D, 2 * D, -200 * D)), duration=200.0)
+    spec = PRESETS["seed000"].noise_free()
+    path = write_csv(tmp_path / "rec.csv", simulate(tr, spec, 0.01))
+    r = subprocess.run([sys.executable, "-m", "fusionbench", "align", str(path), "--lat", "34", "--method",
+                        "baselines.factor_graph:FactorGraphAligner", "--json"], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["method"] == "gtsam"
+    C_end = tr.truth([out["t_end"]]).C_bn[0]
+    phi = attitude.misalignment(np.array(out["C_bn"]), C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, LAT, 0.0)
+    assert phi == pytest.approx(lim, abs=0.2 * units.ARCMIN)
+    assert out["heading_deg"] == pytest.approx(200.0, abs=0.1)
+
+
+def test_absurd_inputs_are_refused_naming_the_field():
+    tr, data, _ = static(30.0, IMUSpec(), 20.0)
+    fg = FactorGraphAligner()
+    with pytest.raises(ValueError, match="latitude"):
+        fg.align(data, Site.from_degrees(89.5))
+    with pytest.raises(ValueError, match="duration"):
+        fg.align(simulate(tr, IMUSpec(), 0.01, duration=5.0), Site(LAT))
+    with pytest.raises(ValueError, match="vref"):
+        fg.align(data, Site(LAT), vref=np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="init"):
+        fg.align(data, Site(LAT), init=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="keyframe_s"):
+        FactorGraphAligner(keyframe_s=0.0)
