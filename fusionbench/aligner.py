@@ -162,3 +162,31 @@ def initial_attitude(init, runs):
     if init is None:
         return None
     return np.broadcast_to(np.asarray(init, dtype=float), (runs, 3, 3)).copy()
+
+
+def coarse_then_fine(imu: IMUData, site: Site, vref, coarse, coarse_s: float, fine):
+    """Initialise with a coarse aligner on the first ``coarse_s`` seconds, then run ``fine`` on the rest.
+
+    For fine aligners that need an initial attitude within a few degrees but must accept any
+    heading. ``coarse`` is an aligner (e.g. ``baselines.coarse.InertialCoarseAligner``);
+    ``fine(imu_rest, vref_rest, C0)`` returns the fine aligner's AlignmentResult on the remaining
+    increments from the coarse attitude ``C0`` (R, 3, 3). The histories are joined; arrays of the
+    fine result's ``extra`` shaped (R, M, ...) get NaN over the coarse part.
+    """
+    t, dth, dv = imu.increments()
+    k0 = int(round(coarse_s / imu.dt))
+    if not 0 < k0 < t.size - 1:
+        raise ValueError(f"duration: the coarse stage of {coarse_s:g} s leaves no data for fine alignment "
+                         f"in {imu.duration:g} s")
+    first = coarse.align(IMUData(t[:k0], dth[:, :k0], dv[:, :k0], "increment"), site)
+    rest = IMUData(t[k0:], dth[:, k0:], dv[:, k0:], "increment")
+    res = fine(rest, None if vref is None else np.asarray(vref)[:, k0:], first.C_bn_final)
+    m = first.t.size
+    extra = {}
+    for key, val in res.extra.items():
+        if isinstance(val, np.ndarray) and val.ndim >= 2 and val.shape[:2] == res.C_bn.shape[:2]:
+            pad = np.full((val.shape[0], m) + val.shape[2:], np.nan)
+            val = np.concatenate([pad, val], axis=1)
+        extra[key] = val
+    return AlignmentResult(res.method, np.concatenate([first.t, res.t]),
+                           np.concatenate([first.C_bn, res.C_bn], axis=1), extra)

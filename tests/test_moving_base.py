@@ -1,0 +1,298 @@
+"""ESO/TD moving-base aligner (seed 001): limits on the 0.1 g moving base, noise band, ESO and TD.
+
+Seed 001's base: latitude 34 deg, accelerating east at 0.1 g from rest for 400 s (390 m/s at the
+end, so the longitude rate reaches the earth rate), initial misalignment psi = 20', 20', 40'.
+"""
+
+import numpy as np
+import pytest
+
+from adrc.moving_base import ESOTDAligner, FSTTrackingDifferentiator, SecondOrderESO, fst
+from fusionbench import attitude, earth, metrics, trajectory as tj, units
+from fusionbench.aligner import Site
+from fusionbench.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
+
+D = np.pi / 180
+LAT = 34 * D
+ARCMIN = units.ARCMIN
+PSI0 = np.array([20.0, 20.0, 40.0]) * ARCMIN
+SITE = Site(LAT)
+
+
+def _moving_base(dt, spec, runs=1, sigma=0.0, seed=0):
+    tr = tj.accelerating(LAT, duration=400.0)
+    data = simulate(tr, spec, dt, runs=runs, seed=seed)
+    vref = simulate_vref(tr, VelocityReferenceSpec((sigma,) * 3), data.increments()[0], runs=runs, seed=seed)
+    C0 = tr.truth([data.t0]).C_bn[0]
+    return tr, data, vref, C0
+
+
+def _specific_force_n(tr, t):
+    _, f_b = tr.kinematics(t)
+    return np.einsum("nij,nj->ni", tr.truth(t).C_bn, f_b)
+
+
+def moving_base_limits(tr, t, eps_n, nab_n):
+    """Error psi - psi_hat (rad, (R, M, 3)) that constant biases leave in eqs. 7, 9, 12 as solved.
+
+    With p = psiN - n psiU - nabE / fU and q = psiE - s psiU + nabN / fU (eqs. 7, 9 without the psiU
+    terms; s = fE / fU, n = fN / fU) and the strapdown's psi' (eq. 1 with -eps), the module's
+    ``psiU_hat D = W sinL p - q' - s W cosL q`` (D = W cosL (1 + s^2) - W sinL n + s') gives, for an
+    eastward base (L_dot = 0)::
+
+        eU = psiU - psiU_hat = (-epsE + s epsU + W sinL nabE / fU + s W cosL nabN / fU + k) / D
+        eE = -nabN / fU + s eU,    eN = nabE / fU + n eU
+
+    with k = d(nabN / fU)/dt = -nabN fU' / fU^2. On a static base (s = n = k = 0, W = w_ie) this is
+    the usual [-nabN / g, nabE / g, -epsE / (w_ie cos L) + tan L nabE / g]. The truth's specific force
+    is taken half a step before each report (the trajectory's acceleration stops at exactly 400 s).
+    """
+    t = np.asarray(t, dtype=float) - 0.05
+    f = _specific_force_n(tr, t)
+    fdot = f - _specific_force_n(tr, t - 1.0)
+    tru = tr.truth(t)
+    L = tru.lat
+    _, rn = earth.radii(L)
+    W = earth.OMEGA_IE + tru.v_n[:, 0] / ((rn + tru.h) * np.cos(L))
+    fE, fN, fU = f.T
+    s, n = fE / fU, fN / fU
+    ds = fdot[:, 0] / fU - fE * fdot[:, 2] / fU**2
+    eps = np.asarray(eps_n, dtype=float).reshape(-1, 1, 3)
+    nab = np.asarray(nab_n, dtype=float).reshape(-1, 1, 3)
+    k = -nab[..., 1] * fdot[:, 2] / fU**2
+    den = W * np.cos(L) * (1 + s * s) - W * np.sin(L) * n + ds
+    eU = (-eps[..., 0] + s * eps[..., 2] + W * np.sin(L) * nab[..., 0] / fU + s * W * np.cos(L) * nab[..., 1] / fU
+          + k) / den
+    return np.stack([-nab[..., 1] / fU + s * eU, nab[..., 0] / fU + n * eU, eU], axis=-1)
+
+
+def test_noise_free_seed001_moving_base_lands_on_the_moving_base_limits():
+    spec = PRESETS["seed001"].noise_free()  # drift 0.01 deg/h, bias 100 ug, every axis
+    tr, data, vref, C0 = _moving_base(0.1, spec)  # the paper's T = 0.1 s
+    res = ESOTDAligner().align(data, SITE, vref=vref, init=attitude.apply_misalignment(C0, PSI0))
+    phi = metrics.misalignment_history(res.C_bn, tr.truth(res.t).C_bn)
+    # body axes = ENU on this base, so the biases in n are the body ones
+    lim = moving_base_limits(tr, res.t, spec.gyro.bias, spec.accel.bias)
+    # at 400 s: [-0.434, 0.342, -0.867]' (the static-base limits would be [-0.344, 0.344, -2.525]':
+    # W = w_ie + lambda_dot has doubled and fE / fU = 0.1 couples the channels)
+    assert lim[0, -1] / ARCMIN == pytest.approx([-0.434, 0.342, -0.867], abs=0.002)
+    g, wN = earth.gravity(LAT), earth.OMEGA_IE * np.cos(LAT)
+    static = np.array([-spec.accel.bias[1] / g, spec.accel.bias[0] / g,
+                       -spec.gyro.bias[0] / wN + np.tan(LAT) * spec.accel.bias[0] / g])
+    assert abs(phi[0, -1, 2] - static[2]) > 1.5 * ARCMIN  # the moving-base terms matter
+    # final error on the limits (measured: within 0.0015', 0.0011', 0.014')
+    assert phi[0, -1] == pytest.approx(lim[0, -1], abs=0.05 * ARCMIN)
+    # convergence: within 0.1' of the (slowly moving) limit on every axis from 90 s on (measured 75 s;
+    # first feedback into the strapdown at 64 s), within 0.05' from 150 s on (measured 0.028')
+    late = res.t >= 90.0
+    assert np.abs(phi[0, late] - lim[0, late]).max() < 0.1 * ARCMIN
+    late = res.t >= 150.0
+    assert np.abs(phi[0, late] - lim[0, late]).max() < 0.05 * ARCMIN
+    assert res.t.shape == (4000,) and res.C_bn.shape == (1, 4000, 3, 3)
+    assert res.extra["psi_hat_rad"].shape == (1, 4000, 3)
+    # what was fed back plus what is left is the strapdown's misalignment, to first order: about psi0
+    total = res.extra["psi_hat_rad"][0, -1] + res.extra["psi_feedback_rad"][0, -1]
+    assert total == pytest.approx(PSI0, abs=2 * ARCMIN)
+
+
+def test_the_papers_open_loop_errs_by_the_second_order_terms_only():
+    spec = PRESETS["seed001"].noise_free()
+    tr, data, vref, C0 = _moving_base(0.1, spec, runs=2)
+    init = np.stack([attitude.apply_misalignment(C0, PSI0), attitude.apply_misalignment(C0, PSI0 / 100)])
+    res = ESOTDAligner(feedback_from_s=None).align(data, SITE, vref=vref, init=init)
+    phi = metrics.misalignment_history(res.C_bn_final[:, None], tr.truth([400.0]).C_bn)[:, 0]
+    lim = moving_base_limits(tr, [400.0], spec.gyro.bias, spec.accel.bias)[0, 0]
+    # a small initial error: the small-angle model is exact and the open loop lands on the limits
+    assert phi[1] == pytest.approx(lim, abs=0.05 * ARCMIN)
+    # seed 001's 20', 40': second-order terms ~ g psi^2 / 2 and W psi^2 (measured 0.12', 0.11', 0.34')
+    dev = np.abs(phi[0] - lim) / ARCMIN
+    assert dev.max() < 0.4 and dev[2] > 0.2
+
+
+def _noise_sigma(h, dt, sigma, beta1, beta2, h1, lat, W, s, n, fU):
+    """Std (rad) of psi_hat from white reference noise ``sigma`` (m/s per sample at ``dt``).
+
+    alpha = 1 and the TD in its linear zone make the chain linear: per step the ESO (eq. 6) sees
+    y = -(mean of the step's h / dt noise samples), s_k = A s_{k-1} + B y_k with
+    A = [[1 - h beta1, h], [-h beta2, 1]], B = [h beta1, h beta2]; q = z22 / fU and p = -z12 / fU;
+    the TD (eq. 15, linear zone) x_k = F x_{k-1} + G q_k with F = [[1, h], [-h / h1^2, 1 - 2h / h1]],
+    G = [0, h / h1^2]; psiU = (W sinL p - x2 - s W cosL q) / D, psiE = q + s psiU, psiN = p + n psiU.
+    The variance is the sum of the squared impulse responses of the two channels."""
+    A = np.array([[1 - h * beta1, h], [-h * beta2, 1.0]])
+    B = np.array([h * beta1, h * beta2])
+    F = np.array([[1.0, h], [-h / h1**2, 1 - 2 * h / h1]])
+    G = np.array([0.0, h / h1**2])
+    Dn = W * np.cos(lat) * (1 + s * s) - W * np.sin(lat) * n
+    steps = int(20 * h1 / h) + 2000
+    var = np.zeros(3)
+    for channel in "EN":
+        z, x = np.zeros(2), np.zeros(2)
+        for k in range(steps):
+            z = A @ z + B * (k == 0)
+            if channel == "N":
+                q, p = z[1] / fU, 0.0
+                x = F @ x + G * q
+            else:
+                q, p = 0.0, -z[1] / fU
+            pU = (W * np.sin(lat) * p - x[1] - s * W * np.cos(lat) * q) / Dn
+            var += np.array([q + s * pU, p + n * pU, pU]) ** 2
+    return sigma * np.sqrt(dt / h) * np.sqrt(var)
+
+
+def test_noisy_reference_and_random_biases_stay_within_the_derived_noise_band():
+    # seed 001's random drift and bias (a constant per run), a 1 cm/s reference at 100 Hz averaged
+    # to the 0.1 s step, and a TD slow enough for that noise (h1 = 20 s; the paper's 0.5 s would
+    # give ~9 deg of azimuth noise)
+    runs, dt, sigma, h1 = 4, 0.01, 0.01, 20.0
+    spec = PRESETS["seed001"]
+    tr, data, vref, C0 = _moving_base(dt, spec, runs=runs, sigma=sigma, seed=11)
+    aligner = ESOTDAligner(td_h1=h1)
+    res = aligner.align(data, SITE, vref=vref, init=attitude.apply_misalignment(C0, PSI0))
+    # the runs' biases, read off the data against the exact increments (no white sensor noise)
+    _, dth, dv = tr.increments(0.0, dt, data.samples)
+    Cn = tr.truth([200.0]).C_bn[0]
+    eps_n = ((data.gyro - dth) / dt).mean(axis=1) @ Cn.T
+    nab_n = ((data.accel - dv) / dt).mean(axis=1) @ Cn.T
+    phi = metrics.misalignment_history(res.C_bn, tr.truth(res.t).C_bn)
+    lim = moving_base_limits(tr, res.t, eps_n, nab_n)
+    # noise of the final estimate from the linear noise model, at the end's W, s, n, fU
+    f = _specific_force_n(tr, np.array([399.95]))[0]
+    tru = tr.truth([399.95])
+    W = earth.OMEGA_IE + tru.v_n[0, 0] / ((earth.radii(LAT)[1] + tru.h[0]) * np.cos(LAT))
+    sig = _noise_sigma(0.1, dt, sigma, 0.6, 0.08, h1, LAT, W, f[0] / f[2], f[1] / f[2], f[2])
+    assert sig / ARCMIN == pytest.approx([0.142, 0.0274, 1.46], rel=0.02)
+    err = phi[:, -1] - lim[:, -1]
+    assert np.all(np.abs(err) < 4 * sig + 0.05 * ARCMIN)
+    # the scatter about the limits over the last 100 s matches the model (measured 0.8-1.1 sigma)
+    tail = res.t >= 300.0
+    rms = np.sqrt(np.mean((phi[:, tail] - lim[:, tail]) ** 2, axis=(0, 1)))
+    assert np.all((rms > 0.5 * sig) & (rms < 1.5 * sig + 0.01 * ARCMIN))
+
+
+def _eso_steady_ratio(h, b1, b2, w):
+    """|z2 - x'| / |x'| in steady state for x' = sin(w t): s_k = A s_{k-1} + B y_k (eq. 6, alpha = 1)
+    with y_k = x(k h) = Y e^{j w k h}, Y = 1 / (j w), gives S = (I - e^{-j w h} A)^-1 B Y."""
+    A = np.array([[1 - h * b1, h], [-h * b2, 1.0]])
+    B = np.array([h * b1, h * b2])
+    S = np.linalg.solve(np.eye(2) - np.exp(-1j * w * h) * A, B) / (1j * w)
+    return abs(S[1] - 1.0)
+
+
+def test_eso_tracks_a_ramp_with_the_derived_lag_and_a_sinusoid_within_the_derived_bound():
+    h, b1, b2 = 0.1, 0.6, 0.08
+    # ramp disturbance x' = b + d t (y = x = b t + d t^2 / 2): steady state of eq. 6,
+    # e1 = -d / beta2 and z2 after the update at t_k = x'(t_k) + d (3h/2 - beta1 / beta2)
+    b, d = 0.05, 2e-4
+    eso = SecondOrderESO((1,), h, b1, b2, alpha=1.0, delta=2 * h)
+    t = np.arange(3000) * h
+    eso.reset(0.0)
+    for k in range(t.size):
+        _, z2 = eso.update(b * t[k] + d * t[k] ** 2 / 2)
+    assert z2[0] - (b + d * t[-1]) == pytest.approx(d * (1.5 * h - b1 / b2), rel=1e-6)
+    # the same, referred to the next sample as SecondOrderESO.steady_lag (used by the feedback) states it
+    e1, e2 = eso.steady_lag(d)
+    assert z2[0] - (b + d * (t[-1] + h)) == pytest.approx(e2[()], rel=1e-6)
+    t_next = t[-1] + h
+    assert eso.z1[0] - (b * t_next + d * t_next**2 / 2) == pytest.approx(e1[()], rel=1e-6)
+    # sinusoidal disturbance x' = A sin(w t), period 300 s: error amplitude ratio from the discrete
+    # transfer function (continuous: |1 - G(jw)| ~ w beta1 / beta2 = 0.157)
+    Amp, w = 0.05, 2 * np.pi / 300
+    ratio = _eso_steady_ratio(h, b1, b2, w)
+    assert ratio == pytest.approx(abs(1 - b2 / (-w * w + 1j * w * b1 + b2)), rel=0.02)
+    eso = SecondOrderESO((1,), h, b1, b2, alpha=1.0, delta=2 * h)
+    t = np.arange(12000) * h
+    y = Amp * (1 - np.cos(w * t)) / w
+    err = np.empty(t.size)
+    for k in range(t.size):
+        _, z2 = eso.update(y[k])
+        err[k] = z2[0] - Amp * np.sin(w * t[k])
+    late = np.abs(err[t > 600])  # the slowest mode (5 s) is long gone
+    assert late.max() <= ratio * Amp * (1 + 1e-4)
+    assert late.max() >= 0.99 * ratio * Amp
+
+
+def _td_steady_ratio(h, h1, w):
+    """|x2 - v'| / |v'| in steady state for v = sin(w t), TD eq. 15 in its linear zone:
+    x_k = F x_{k-1} + G v_k, F = [[1, h], [-h / h1^2, 1 - 2h / h1]], G = [0, h / h1^2]."""
+    F = np.array([[1.0, h], [-h / h1**2, 1 - 2 * h / h1]])
+    G = np.array([0.0, h / h1**2])
+    S = np.linalg.solve(np.eye(2) - np.exp(-1j * w * h) * F, G)
+    return abs(S[1] / (1j * w) - 1.0)
+
+
+@pytest.mark.parametrize("h1", [0.5, 20.0])
+def test_fst_td_differentiates_a_ramp_exactly_and_a_sinusoid_within_the_derived_bound(h1):
+    h, r = 0.1, 500.0
+    # ramp v = a t: linear zone (|y| < h1^2 r), steady state of eq. 15: x2 = a and, after the update
+    # at t_k, x1 = v(t_k) - (2 h1 - h) a
+    a = 3e-4
+    td = FSTTrackingDifferentiator((1,), h, r, h1)
+    n = int(30 * h1 / h) + 200
+    for k in range(n):
+        x1, x2 = td.update(a * k * h)
+    assert x2[0] == pytest.approx(a, rel=1e-9)
+    assert x1[0] - a * (n - 1) * h == pytest.approx(-(2 * h1 - h) * a, rel=1e-6)
+    # sinusoid: the linear filter 1 / (1 + h1 s)^2 on the derivative, discretised (the continuous
+    # form is only close for h << h1)
+    Amp, w = 0.01, 2 * np.pi / (60 * h1)
+    ratio = _td_steady_ratio(h, h1, w)
+    if h1 >= 20 * h:
+        assert ratio == pytest.approx(abs(1 / (1 + 1j * w * h1) ** 2 - 1), rel=0.02)
+    td = FSTTrackingDifferentiator((1,), h, r, h1)
+    t = np.arange(int(200 * h1 / h)) * h
+    err = np.empty(t.size)
+    for k in range(t.size):
+        _, x2 = td.update(Amp * np.sin(w * t[k]))
+        err[k] = x2[0] - Amp * w * np.cos(w * t[k])
+    late = np.abs(err[t > 40 * h1])
+    assert late.max() <= ratio * Amp * w * (1 + 1e-3)
+    assert late.max() >= 0.98 * ratio * Amp * w
+
+
+@pytest.mark.parametrize("V", [1e3, 1e4])
+def test_fst_td_crosses_a_large_step_with_bounded_acceleration_and_no_overshoot(V):
+    h, r, h1 = 0.1, 500.0, 0.5  # the paper's TD; V beyond the linear zone h1^2 r = 125
+    td = FSTTrackingDifferentiator((1,), h, r, h1)
+    x1s, x2s = [], []
+    for _ in range(300):
+        assert abs(fst(td.x1, td.x2, V, r, h1)[0]) <= r * (1 + 1e-12)  # |x2'| <= r
+        x1, x2 = td.update(V)
+        x1s.append(x1[0])
+        x2s.append(x2[0])
+    x1s, x2s = np.array(x1s), np.array(x2s)
+    assert x2s.max() <= np.sqrt(r * V)  # the bang-bang peak rate of a time-optimal crossing
+    assert x1s.max() <= V * (1 + 1e-12)  # no overshoot
+    # the time-optimal crossing 2 sqrt(V / r) plus the linear zone's tail of a few h1
+    settled = np.nonzero(np.abs(x1s - V) > 1e-3 * V)[0][-1] * h + h
+    assert settled <= 2 * np.sqrt(V / r) + 6 * h1
+
+
+@pytest.mark.parametrize("lat_deg", [34.0, -45.0])
+def test_static_base_with_any_body_attitude_lands_on_the_shared_static_limits(lat_deg):
+    # no reference given (zero velocity), rate samples, a tilted body at heading 70 deg: s = n = 0,
+    # W = w_ie, and the limits are fusionbench.metrics' (measured within 0.004')
+    lat = lat_deg * D
+    tr = tj.Trajectory(lat, 0.5, 100.0, tj.EulerSway(mean=(1 * D, -2 * D, -70 * D)), duration=300.0)
+    spec = PRESETS["seed001"].noise_free()
+    data = simulate(tr, spec, 0.1, output="rate")
+    C0 = tr.truth([data.t0]).C_bn[0]
+    res = ESOTDAligner().align(data, Site(lat, 0.5, 100.0), init=attitude.apply_misalignment(C0, PSI0))
+    C_end = tr.truth([res.t_end]).C_bn[0]
+    phi = attitude.misalignment(res.C_bn_final[0], C_end)
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, lat, 100.0)
+    assert phi == pytest.approx(lim, abs=0.02 * ARCMIN)
+
+
+def test_without_an_initial_attitude_it_starts_from_a_coarse_alignment_at_any_heading():
+    # stationary base, heading 200 deg, no guess: inertial-frame coarse alignment for 60 s first
+    from fusionbench import metrics, trajectory as tj
+    from fusionbench.imu import simulate
+
+    lat = SITE.lat
+    tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(0.02, -0.03, np.radians(-200.0))), duration=300.0)
+    spec = PRESETS["seed000"].noise_free()
+    res = ESOTDAligner().align(simulate(tr, spec, 0.01), SITE)
+    C = tr.truth([tr.duration]).C_bn[0]
+    lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C, lat, 0.0)
+    assert attitude.misalignment(res.C_bn_final[0], C) == pytest.approx(lim, abs=0.01 * ARCMIN)
+    assert ESOTDAligner().name == "eso-td" and ESOTDAligner().min_duration_s == 64.0
