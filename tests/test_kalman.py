@@ -79,3 +79,17 @@ def test_cli_aligns_a_written_csv_with_kf_from_any_heading(tmp_path):
     phi = attitude.misalignment(np.array(out["C_bn"]), C_end)
     lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, LAT, 450.0)
     assert phi == pytest.approx(lim, abs=0.2 * units.ARCMIN)
+
+
+def test_kf_and_gtsam_agree_on_the_same_recording_within_their_predicted_sigma():
+    from baselines.factor_graph import FactorGraphAligner
+
+    spec = PRESETS["seed000"]
+    tr = static(200.0, 240.0)
+    data = simulate(tr, spec, 0.01, runs=3, seed=9)
+    site = Site(LAT, 1.9, 450.0)
+    kf = KalmanAligner(imu=spec, vel_sigma=0.01).align(data, site)
+    fg = FactorGraphAligner().align(data, site)
+    diff = attitude.misalignment(kf.C_bn_final, fg.C_bn_final)
+    sigma = np.hypot(kf.extra["sigma_phi"][:, -1], fg.extra["sigma_phi_noise"][:, -1])
+    assert np.all(np.abs(diff) < 3 * sigma), diff / sigma
