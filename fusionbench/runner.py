@@ -9,6 +9,7 @@ and keeps the misalignment history of each run against truth. The figures of ``m
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -127,6 +128,9 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     n_samples = int(round(duration / scn.dt))
     if batch_size is None:
         batch_size = int(max(1, min(runs, BATCH_BYTES // (n_samples * 48))))
+        if n_jobs != 1:  # at least one batch per worker
+            workers = (os.cpu_count() or 1) if n_jobs < 0 else n_jobs
+            batch_size = max(1, min(batch_size, -(-runs // workers)))
     starts = list(range(0, runs, batch_size))
     jobs = [(k0, min(batch_size, runs - k0)) for k0 in starts]
     show = sys.stderr.isatty() if progress is None else progress
