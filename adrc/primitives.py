@@ -1,7 +1,8 @@
 """Han's active disturbance rejection control primitives, discrete forms, vectorised over a batch.
 
 Equation numbers are those of seed 000 (Zhou, Yang, Qin, Control and Decision 26(9), 2011), which
-quotes Han (2007). Every function takes NumPy arrays (any common shape: Monte Carlo runs, channels)
+quotes Han (2007), except for fst, the fst tracking differentiator and the second-order ESO at the
+end, numbered as in seed 001 (Zhao, Zhuang, Yang, Control and Decision 22(2), 2007). Every function takes NumPy arrays (any common shape: Monte Carlo runs, channels)
 and returns arrays of the broadcast shape; the classes keep their states as such arrays.
 
 Units follow the plant: for a gyrocompass level channel the output y is a velocity error (m/s), the
@@ -153,3 +154,149 @@ def nlsef(e1, e2, z3, b0, r1, h1, c1):
     b0 = np.asarray(b0, dtype=float)
     u0 = -fhan(e1, e2, r1, h1, c1)
     return np.sign(b0) * u0 - z3 / b0
+
+
+# ------------------------------------------------------- seed 001: fst tracking differentiator, 2nd-order ESO
+def fst(x1, x2, v, r, h1):
+    """Han's fst (seed 001, eq. 15 text): the TD's acceleration towards ``v``, bounded by ``r``.
+
+    ::
+
+        d = h1 r,  d0 = h1 d,  e = x1 - v,  y = e + h1 x2
+        g = x2 - sign(y) (d - sqrt(8 r |y| + d^2)) / 2    if |y| >= d0
+        g = x2 + y / h1                                   if |y| <  d0
+        fst = -r sat(g, d),  sat(g, d) = sign(g) if |g| >= d else g / d
+
+    (the printed formula lost the square root). Inside the linear zone (|y| < h1^2 r, |g| < h1 r)
+    fst = -(x1 - v) / h1^2 - 2 x2 / h1.
+
+    Parameters
+    ----------
+    x1, x2 : array_like
+        Tracking signal and its derivative (units of v, and v per second).
+    v : array_like
+        Input signal.
+    r : float
+        Speed factor: acceleration bound, units of v per s^2.
+    h1 : float
+        Filter factor, s.
+    """
+    x1 = np.asarray(x1, dtype=float)
+    x2 = np.asarray(x2, dtype=float)
+    d = h1 * r
+    d0 = h1 * d
+    y = x1 - v + h1 * x2
+    ay = np.abs(y)
+    g = np.where(ay >= d0, x2 - np.sign(y) * (d - np.sqrt(8.0 * r * ay + d * d)) / 2.0, x2 + y / h1)
+    return -r * np.where(np.abs(g) >= d, np.sign(g), g / d)
+
+
+class FSTTrackingDifferentiator:
+    """Tracking differentiator with fst, eq. (15), batched: x1 follows v, x2 is its derivative.
+
+    ``x1(k+1) = x1 + h x2``; ``x2(k+1) = x2 + h fst(x1, x2, v, r, h1)`` (eqs. 14-15).
+
+    Parameters
+    ----------
+    shape : tuple
+        Batch shape.
+    h : float
+        Step, s.
+    r : float
+        Speed factor (units of v / s^2).
+    h1 : float
+        Filter factor, s (h1 > h filters noise; linear zone double pole at -1/h1).
+    """
+
+    def __init__(self, shape, h, r, h1):
+        self.h, self.r, self.h1 = float(h), float(r), float(h1)
+        self.x1 = np.zeros(shape)
+        self.x2 = np.zeros(shape)
+
+    def reset(self, v, dv=0.0):
+        """Start at rest on ``v`` (or moving at ``dv``)."""
+        self.x1 = np.array(np.broadcast_to(v, self.x1.shape), dtype=float)
+        self.x2 = np.array(np.broadcast_to(dv, self.x2.shape), dtype=float)
+
+    def update(self, v):
+        """One step with input ``v``; returns (x1, x2) after the step."""
+        x1 = self.x1 + self.h * self.x2
+        self.x2 = self.x2 + self.h * fst(self.x1, self.x2, v, self.r, self.h1)
+        self.x1 = x1
+        return self.x1, self.x2
+
+
+class SecondOrderESO:
+    """Second-order ESO, eq. (6), batched: z1 tracks y, z2 the total rate of change of y.
+
+    ::
+
+        e = z1 - y
+        z1 <- z1 + h (z2 - beta1 e)
+        z2 <- z2 - h beta2 fal(e, alpha, delta)
+
+    With alpha = 1 it is linear: z2 = G(s) y', G = beta2 / (s^2 + beta1 s + beta2).
+
+    Parameters
+    ----------
+    shape : tuple
+        Batch shape (e.g. (runs, channels)).
+    h : float
+        Step, s.
+    beta1, beta2 : float or array_like
+        Continuous gains (1/s, 1/s^2 for alpha = 1), broadcast against ``shape``.
+    alpha, delta : float or array_like
+        fal exponent and linear zone (units of y).
+    """
+
+    def __init__(self, shape, h, beta1, beta2, alpha=1.0, delta=0.2):
+        self.h = float(h)
+        self.beta1 = np.asarray(beta1, dtype=float)
+        self.beta2 = np.asarray(beta2, dtype=float)
+        self.alpha = np.asarray(alpha, dtype=float)
+        self.delta = np.asarray(delta, dtype=float)
+        self.z1 = np.zeros(shape)
+        self.z2 = np.zeros(shape)
+
+    def reset(self, y, rate=0.0):
+        """Start with z1 = y, z2 = rate."""
+        self.z1 = np.array(np.broadcast_to(y, self.z1.shape), dtype=float)
+        self.z2 = np.array(np.broadcast_to(rate, self.z2.shape), dtype=float)
+
+    def steady_lag(self, rate):
+        """Steady-state errors of the discrete observer when y' is a ramp of slope ``rate`` (y'' = rate).
+
+        Between updates z1, z2 are the predictions for the next sample k+1; then
+        ``z1 - y_{k+1} = e1 = -rate delta^(1-alpha) / beta2`` (fal in its linear zone; exact for
+        alpha = 1) and ``z2 - y'(t_{k+1}) = e2 = rate h / 2 + beta1 e1`` (a lag of beta1 / beta2 - h / 2).
+        Returns (e1, e2)."""
+        rate = np.asarray(rate, dtype=float)
+        e1 = -rate * self.delta ** (1.0 - self.alpha) / self.beta2
+        return e1, rate * self.h / 2.0 + self.beta1 * e1
+
+    def shift(self, d_rate, d_slope=0.0, lead=None):
+        """Account for a known change of the observed signal's dynamics from now on: y' jumps by
+        ``d_rate`` and its slope y'' by ``d_slope``; returns the changes (dz1, dz2).
+
+        After :meth:`update`, z1 and z2 are already the predictions for the next measurement, made
+        with the old dynamics, ``lead`` seconds ahead (h for point samples, (h + dt) / 2 for the mean
+        of the next step's samples at interval dt): the change dy(t) = d_rate t + d_slope t^2 / 2 is
+        added as if it had always been there, z1 += dy(lead) + e1, z2 += dy'(lead) + e2, with the
+        steady ramp lag (e1, e2) of :meth:`steady_lag`.
+        """
+        lead = self.h if lead is None else float(lead)
+        d_slope = np.asarray(d_slope, dtype=float)
+        e1, e2 = self.steady_lag(d_slope)
+        dz1 = d_rate * lead + d_slope * lead**2 / 2.0 + e1
+        dz2 = d_rate + d_slope * lead + e2
+        self.z1 = self.z1 + dz1
+        self.z2 = self.z2 + dz2
+        return dz1, dz2
+
+    def update(self, y):
+        """One step with measurement ``y``; returns (z1, z2) after the step."""
+        e = self.z1 - y
+        z1 = self.z1 + self.h * (self.z2 - self.beta1 * e)
+        self.z2 = self.z2 - self.h * self.beta2 * fal(e, self.alpha, self.delta)
+        self.z1 = z1
+        return self.z1, self.z2

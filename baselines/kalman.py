@@ -29,7 +29,6 @@ the predicted covariance when they exceed what P and R explain (a stand-in for a
 
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 from filterpy.kalman import KalmanFilter

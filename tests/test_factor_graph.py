@@ -137,7 +137,7 @@ def test_cli_aligns_a_written_csv_from_200_deg(tmp_path):
     spec = PRESETS["seed000"].noise_free()
     path = write_csv(tmp_path / "rec.csv", simulate(tr, spec, 0.01))
     r = subprocess.run([sys.executable, "-m", "fusionbench", "align", str(path), "--lat", "34", "--method",
-                        "baselines.factor_graph:FactorGraphAligner", "--json"], capture_output=True, text=True,
+                        "gtsam", "--json"], capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
