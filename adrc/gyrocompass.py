@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench.aligner import AlignmentResult, Site, initial_attitude
-from fusionbench.compass import AzimuthFit, CommandLoop, check_compass_latitude, correct_azimuth, level_guess
+from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 
 from .primitives import ExtendedStateObserver, TrackingDifferentiator, nlsef
 
@@ -86,11 +86,7 @@ class ADRCGyrocompass:
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
-        check_compass_latitude(site.lat, self.name)
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
-        C0 = initial_attitude(init, imu.runs)
-        loop = CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, self.h, vref)
+        loop = start_loop(self, imu, site, vref, init, self.h)
         h, R, g = loop.period, loop.R, site.g
         k = self.gains(h)
         b0 = np.array([-g, g])  # channels: [east (drives w_cN), north (drives w_cE)]

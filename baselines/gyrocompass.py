@@ -45,8 +45,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, initial_attitude
-from fusionbench.compass import AzimuthFit, CommandLoop, check_compass_latitude, correct_azimuth, level_guess
+from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 
 
 def sigma_of(td, xi):
@@ -102,11 +102,7 @@ class PIDGyrocompass:
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
-        check_compass_latitude(site.lat, self.name)
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
-        C0 = initial_attitude(init, imu.runs)
-        loop = CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, self.period, vref)
+        loop = start_loop(self, imu, site, vref, init, self.period)
         h, R, g = loop.period, loop.R, site.g
         rm, rn = earth.radii(site.lat)
         radius = np.sqrt(rm * rn) + site.h

@@ -212,6 +212,17 @@ def level_guess(imu, seconds=1.0):
     return euler_to_dcm(np.stack([pitch, roll, np.zeros_like(pitch)], axis=-1))
 
 
+def start_loop(method, imu, site, vref, init, period):
+    """The checks every gyrocompass makes, then its :class:`CommandLoop`: latitude within
+    MAX_LATITUDE_DEG, at least ``method.min_duration_s`` of data, and the initial attitude ``init``
+    (R, 3, 3) or, when None, a levelled guess with yaw 0 (:func:`level_guess`)."""
+    check_compass_latitude(site.lat, method.name)
+    if imu.duration < method.min_duration_s:
+        raise ValueError(f"duration: {method.name} needs at least {method.min_duration_s:g} s, found {imu.duration:g} s")
+    C0 = None if init is None else np.broadcast_to(np.asarray(init, dtype=float), (imu.runs, 3, 3)).copy()
+    return CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, period, vref)
+
+
 class CommandLoop:
     """Strapdown on a stationary base, stepped one control period at a time with commanded rates.
 
