@@ -1,0 +1,162 @@
+"""The continuously adjustable damping network of seed 004 (Gu, Wang, Zheng, Zhao 2017), eqs. 1-10.
+
+North level loop of a strapdown attitude system (eq. 1, Fig. 1): with the damping network H(s)
+in the loop, the attitude error responds to the east gyro error and to the vehicle's acceleration::
+
+    da / eps_E  = s / (s^2 + H(s) ws^2)                     (eq. 1)
+    da / dV_N   = (1 - H(s)) / (s^2 + H(s) ws^2) / R        (eq. 2, dV_N the acceleration)
+
+with ws = sqrt(g / R) the Schuler frequency (rad/s). The network (eqs. 3, 7)::
+
+    H(s) = (q T s + 1)(T s / q + 1) / (T s + 1)^2,    1 <= q <= 8
+
+has H(0) = H(inf) = 1 (no steady error, no high-frequency effect) and a phase lead that must peak at
+the loop's crossover wc (eq. 5). Its peak lies at wc T = x*(q), the root of
+dphi/dx = 0 (:func:`phase_peak_x`); the paper's printed closed form
+X^(1/4) / q^(3/4), X = (q + 1)(q - sqrt(q^2 + 1)) + 1, is that root only near q = 3 and is not used.
+The paper places wc at the crossover of the damped loop's asymptotes, wc = q T ws^2; the two
+relations fix T and wc for each q: ``T = sqrt(x* / q) / ws``, ``wc = sqrt(q x*) ws``.
+
+Damping ratio of the closed loop (open loop H ws^2 / s^2), two ways: from the resonant peak of
+the closed loop H ws^2 / (s^2 + H ws^2), Mr = 1 / (2 xi sqrt(1 - xi^2)), as the paper does, and
+from the least-damped pole pair. The paper fits xi = 0.09 (q - 1) (eq. 6).
+
+Acceleration error (eqs. 8-10): with the loop approximated by a second-order system of damping xi,
+a step of acceleration a gives da(t) = -2 a xi exp(-xi ws t) sin(wd t) / (g sqrt(1 - xi^2)),
+wd = ws sqrt(1 - xi^2), whose largest magnitude is 2 a xi exp(-xi ws t*) / g at
+t* = atan(sqrt(1 - xi^2) / xi) / wd.
+
+Units: rad, rad/s, s, m/s^2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+from scipy.optimize import brentq, minimize_scalar
+
+from fusionbench import earth
+
+#: Schuler frequency at the paper's latitude (35 deg), rad/s.
+WS = float(earth.schuler_frequency(np.radians(35.0)))
+
+
+def phase_peak_x(q):
+    """x* = wc T at which the phase of H peaks: the root of
+    q / (1 + q^2 x^2) + (1/q) / (1 + x^2 / q^2) = 2 / (1 + x^2)  (q > 1; 1/sqrt(3)... for q -> 1)."""
+    q = float(q)
+    if q <= 1.0:
+        return 1.0 / np.sqrt(3.0)
+    f = lambda x: q / (1 + q * q * x * x) + (1 / q) / (1 + x * x / (q * q)) - 2 / (1 + x * x)  # noqa: E731
+    return brentq(f, 1e-9, 1.0)
+
+
+def printed_phase_peak_x(q):
+    """The paper's closed form for wc T: ((q + 1)(q - sqrt(q^2 + 1)) + 1)^(1/4) / q^(3/4).
+
+    It matches the true phase peak (:func:`phase_peak_x`) only near q = 3 (1 % there); it is 29 % high
+    at q = 1.5 and 27 % low at q = 8, so it is not used."""
+    q = float(q)
+    X = (q + 1) * (q - np.sqrt(q * q + 1)) + 1
+    return X**0.25 / q**0.75
+
+
+_c = phase_peak_x
+
+
+def time_constant(q, ws=WS):
+    """Network time constant T (s) for coefficient q, with wc at the loop's crossover (module docstring)."""
+    return np.sqrt(_c(q) / q) / ws
+
+
+def crossover(q, ws=WS):
+    """Crossover frequency wc (rad/s) = q T ws^2 = frequency of the network's largest phase lead."""
+    return q * time_constant(q, ws) * ws**2
+
+
+def network(q, ws=WS):
+    """H(s) as a :class:`scipy.signal.TransferFunction` (eq. 3)."""
+    T = time_constant(q, ws)
+    num = np.polymul([q * T, 1.0], [T / q, 1.0])
+    den = np.polymul([T, 1.0], [T, 1.0])
+    return signal.TransferFunction(num, den)
+
+
+def _polys(q, ws):
+    H = network(q, ws)
+    num, den = H.num, H.den
+    char = np.polyadd(np.polymul([1.0, 0.0, 0.0], den), ws**2 * num)  # den (s^2 + H ws^2)
+    return num, den, char
+
+
+def closed_loop(q, ws=WS):
+    """Closed loop H ws^2 / (s^2 + H ws^2) (the complementary sensitivity), a TransferFunction."""
+    num, _, char = _polys(q, ws)
+    return signal.TransferFunction(ws**2 * num, char)
+
+
+def gyro_to_attitude(q, ws=WS):
+    """da / eps_E = s / (s^2 + H ws^2) (eq. 1), rad per rad/s."""
+    _, den, char = _polys(q, ws)
+    return signal.TransferFunction(np.polymul([1.0, 0.0], den), char)
+
+
+def accel_to_attitude(q, ws=WS, radius=None):
+    """da / dV_N = (1 - H) / (s^2 + H ws^2) / R (eq. 2), rad per m/s^2; R = g / ws^2 by default."""
+    _, _, char = _polys(q, ws)
+    R = earth.gravity(np.radians(35.0)) / ws**2 if radius is None else radius
+    T = time_constant(q, ws)
+    # (1 - H) (T s + 1)^2 = (T s + 1)^2 - (q T s + 1)(T s / q + 1) = -T (q - 1)^2 / q s, exactly
+    return signal.TransferFunction([-T * (q - 1) ** 2 / q / R, 0.0], char)
+
+
+def damping_from_peak(q, ws=WS):
+    """Damping ratio from the closed loop's resonant peak Mr = 1 / (2 xi sqrt(1 - xi^2)) (the paper's way).
+
+    Returns 1/sqrt(2) or more (reported as such) when there is no peak above 1 (Mr <= 1)."""
+    cl = closed_loop(q, ws)
+    w = np.logspace(np.log10(ws) - 2, np.log10(ws) + 2, 4000)
+    _, resp = signal.freqresp(cl, w)
+    mr = float(np.max(np.abs(resp)))
+    if mr <= 1.0:
+        return np.sqrt(0.5)
+    return brentq(lambda x: 1 / (2 * x * np.sqrt(1 - x * x)) - mr, 1e-9, np.sqrt(0.5))
+
+
+def damping_from_poles(q, ws=WS):
+    """Damping ratio of the closed loop's least-damped complex pole pair (or 1 if all poles are real)."""
+    poles = np.roots(_polys(q, ws)[2])
+    cplx = poles[np.abs(poles.imag) > 1e-12 * np.abs(poles).max()]
+    if cplx.size == 0:
+        return 1.0
+    return float(np.min(-cplx.real / np.abs(cplx)))
+
+
+def paper_fit(q):
+    """Seed 004's fit xi = 0.09 (q - 1), eq. 6."""
+    return 0.09 * (np.asarray(q, dtype=float) - 1.0)
+
+
+def peak_attitude_error(accel, xi, ws=WS, g=None):
+    """Largest |attitude error| (rad) from a step of acceleration ``accel`` (m/s^2), eq. 10."""
+    g = float(earth.gravity(np.radians(35.0))) if g is None else g
+    xi = np.asarray(xi, dtype=float)
+    t = np.arctan(np.sqrt(1 - xi**2) / xi) / (ws * np.sqrt(1 - xi**2))
+    return 2 * np.asarray(accel) * xi * np.exp(-xi * ws * t) / g
+
+
+def simulated_peak_error(accel, q, ws=WS, hours=6.0):
+    """Largest |attitude error| (rad) of eq. 2 with the actual H(s) for a step of acceleration,
+    by :func:`scipy.signal.lsim` (1 s steps)."""
+    t = np.arange(0.0, hours * 3600.0, 1.0)
+    _, y, _ = signal.lsim(accel_to_attitude(q, ws), np.full(t.size, float(accel)), t)
+    return float(np.max(np.abs(y)))
+
+
+def phase_peak_frequency(q, ws=WS):
+    """Frequency (rad/s) of the largest phase lead of H, found numerically (checks ``crossover``)."""
+    H = network(q, ws)
+    res = minimize_scalar(lambda lw: -np.angle(signal.freqresp(H, [10**lw])[1][0]),
+                          bounds=(np.log10(ws) - 3, np.log10(ws) + 3), method="bounded",
+                          options={"xatol": 1e-10})
+    return 10**res.x
