@@ -106,8 +106,9 @@ def accel_to_attitude(q, ws=WS, radius=None):
     _, _, char = _polys(q, ws)
     R = earth.gravity(np.radians(35.0)) / ws**2 if radius is None else radius
     T = time_constant(q, ws)
-    # (1 - H) (T s + 1)^2 = (T s + 1)^2 - (q T s + 1)(T s / q + 1) = -T (q - 1)^2 / q s, exactly
-    return signal.TransferFunction([-T * (q - 1) ** 2 / q / R, 0.0], char)
+    # (1 - H) (T s + 1)^2 = (T s + 1)^2 - (q T s + 1)(T s / q + 1) = -T (q - 1)^2 / q s exactly;
+    # char is normalised by T^2 (scipy's monic denominator of H), so the numerator is too
+    return signal.TransferFunction([-(q - 1) ** 2 / (q * T) / R, 0.0], char)
 
 
 def damping_from_peak(q, ws=WS):
