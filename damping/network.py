@@ -146,9 +146,11 @@ def peak_attitude_error(accel, xi, ws=WS, g=None):
     return 2 * np.asarray(accel) * xi * np.exp(-xi * ws * t) / g
 
 
-def simulated_peak_error(accel, q, ws=WS, hours=6.0):
+def simulated_peak_error(accel, q, ws=WS, hours=3.0):
     """Largest |attitude error| (rad) of eq. 2 with the actual H(s) for a step of acceleration,
     by :func:`scipy.signal.lsim` (1 s steps)."""
+    if q <= 1.0:  # H = 1: the Schuler-tuned loop has no acceleration error at all (eq. 2)
+        return 0.0
     t = np.arange(0.0, hours * 3600.0, 1.0)
     _, y, _ = signal.lsim(accel_to_attitude(q, ws), np.full(t.size, float(accel)), t)
     return float(np.max(np.abs(y)))
