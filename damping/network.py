@@ -163,3 +163,88 @@ def phase_peak_frequency(q, ws=WS):
                           bounds=(np.log10(ws) - 3, np.log10(ws) + 3), method="bounded",
                           options={"xatol": 1e-10})
     return 10**res.x
+
+
+def gain(q):
+    """k(q) = (q - 1)^2 / q, the weight of the lag difference in the realisation of H (see :func:`state_space`)."""
+    q = np.asarray(q, dtype=float)
+    return (q - 1.0) ** 2 / q
+
+
+def state_space(q, ws=WS):
+    """H(s) realised as two equal first-order lags, a :class:`scipy.signal.StateSpace`.
+
+    With x1 = u / (T s + 1) and x2 = x1 / (T s + 1) (states in the input's units, e.g. m/s),
+    ``H u = u + k (x1 - x2)``, k = (q - 1)^2 / q, because
+    H(s) - 1 = T (q + 1/q - 2) s / (T s + 1)^2 = k T s / (T s + 1)^2 and x1 - x2 = T s u / (T s + 1)^2.
+    The states are lagged copies of the input whatever q is, so q can change from one step to
+    the next without the states jumping (only the output weight k changes); at q = 1 the output is
+    the input (H = 1).
+    """
+    T = time_constant(q, ws)
+    k = float(gain(q))
+    A = np.array([[-1.0 / T, 0.0], [1.0 / T, -1.0 / T]])
+    B = np.array([[1.0 / T], [0.0]])
+    return signal.StateSpace(A, B, np.array([[k, -k]]), np.array([[1.0]]))
+
+
+class DiscreteNetwork:
+    """The lag realisation of H (:func:`state_space`) discretised for a step ``dt`` (s) on a grid of q,
+    so that q may change at every step.
+
+    Each grid point is discretised with :func:`scipy.signal.cont2discrete` (zero-order hold); between
+    grid points the discrete matrices are interpolated linearly in q (grid step 0.005: the
+    interpolation error is below 1e-9 of the state). One step is ``x <- Ad(q) x + Bd(q) u`` after the
+    output ``y = u + k(q) (x1 - x2)``.
+
+    Parameters
+    ----------
+    dt : float
+        Step, s.
+    ws : float
+        Schuler frequency of the loop, rad/s.
+    q_range : (float, float)
+        Range of q covered (default [1, 8], the network's range).
+    """
+
+    def __init__(self, dt, ws=WS, q_range=(1.0, 8.0), q_step=0.005):
+        self.dt, self.ws = float(dt), float(ws)
+        n = int(round((q_range[1] - q_range[0]) / q_step)) + 1
+        self.q = np.linspace(q_range[0], q_range[1], n)
+        self.Ad = np.empty((n, 2, 2))
+        self.Bd = np.empty((n, 2))
+        self.T = np.array([time_constant(q, ws) for q in self.q])  # lag time constant, s
+        for i, q in enumerate(self.q):
+            ss = state_space(q, ws)
+            Ad, Bd, _, _, _ = signal.cont2discrete((ss.A, ss.B, ss.C, ss.D), self.dt, method="zoh")
+            self.Ad[i], self.Bd[i] = Ad, Bd[:, 0]
+
+    def matrices(self, q):
+        """(Ad, Bd) for coefficients ``q`` of any shape S: (S + (2, 2), S + (2,))."""
+        q = np.asarray(q, dtype=float)
+        bad = ~np.isfinite(q) | (q < self.q[0] - 1e-12) | (q > self.q[-1] + 1e-12)
+        if np.any(bad):
+            raise ValueError(f"q: expected values in [{self.q[0]:g}, {self.q[-1]:g}], found {q[bad].ravel()[:3].tolist()}")
+        return self._matrices(q)
+
+    def _matrices(self, q):
+        x = (np.clip(q, self.q[0], self.q[-1]) - self.q[0]) * (1.0 / (self.q[1] - self.q[0]))
+        i = np.minimum(x.astype(np.intp), self.q.size - 2)
+        w = (x - i)[..., None]
+        Bd = self.Bd[i] * (1 - w) + self.Bd[i + 1] * w
+        w = w[..., None]
+        return self.Ad[i] * (1 - w) + self.Ad[i + 1] * w, Bd
+
+    @staticmethod
+    def output(q, x, u):
+        """Network output ``u + k(q) (x1 - x2)`` for states ``x`` (..., 2) and input ``u`` (...)."""
+        return u + gain(q) * (x[..., 0] - x[..., 1])
+
+    def step(self, q, x, u, matrices=None):
+        """One step: returns (y, x_next) for coefficients ``q`` (...), states ``x`` (..., 2), input ``u`` (...).
+
+        ``matrices`` may pass precomputed ``self.matrices(q)`` when q does not change."""
+        Ad, Bd = self._matrices(np.asarray(q, dtype=float)) if matrices is None else matrices
+        y = self.output(q, x, u)
+        x_next = np.einsum("...ij,...j->...i", Ad, x) + Bd * np.asarray(u)[..., None]
+        return y, x_next

@@ -16,6 +16,7 @@ is clipped to [1, 7] (eq. 12). Input accelerations are validated: finite, non-ne
 from __future__ import annotations
 
 import io as _io
+from functools import lru_cache
 
 import joblib
 import numpy as np
@@ -37,7 +38,12 @@ Q_MIN, Q_MAX = 1.0, 7.0
 
 def unit_peak_error(q_grid):
     """Peak attitude error (rad) for a 1 m/s^2 step of acceleration at each q of ``q_grid``."""
-    return np.array([simulated_peak_error(1.0, q) for q in q_grid])
+    return np.array(_unit_peak_error(tuple(float(q) for q in q_grid)))
+
+
+@lru_cache(maxsize=8)
+def _unit_peak_error(q_grid):  # one lsim of 3 h per q: cached, the map and its figure share it
+    return tuple(simulated_peak_error(1.0, q) for q in q_grid)
 
 
 def training_data(accels, max_error=0.03 * DEG, q_grid=None):
