@@ -1,0 +1,308 @@
+"""Free-inertial navigation with seed 004's internal horizontal damping (Sec. 4.1), method ``damped-nav``.
+
+The strapdown (:class:`fusionbench.strapdown.Strapdown`, ENU, body RFU) runs at the IMU rate; every
+``step_s`` (1 s, the paper's step) the damping network H(s) (:mod:`damping.network`) filters the
+horizontal velocity, and the transport rate of the computed frame is taken from the filtered
+velocity ``v_H = H(s) v`` instead of ``v``. The strapdown computes ``omega_en(v)`` itself, so the
+network adds the commanded rate (rad/s, ENU)::
+
+    omega_cmd = omega_en(v_H) - omega_en(v)
+              = [-(vN_H - vN) / (RM + h),  (vE_H - vE) / (RN + h),  tan(L) (vE_H - vE) / (RN + h)]
+
+Sign check, north loop (phi = [phiE, phiN, phiU], C_est = (I - [phi x]) C_true, so
+phi' = d(omega_in) - omega_in x phi - C eps and the specific-force error is -phi x f):
+d(vN)' = g phiE and phiE' = d(omega_E) = -H(s) d(vN) / R, hence s^2 + H(s) ws^2 = 0, the loop of
+eq. 1; an acceleration a of the vehicle enters through (H - 1) v_true / R, which is eq. 2. Each level
+loop has its own network: the east velocity's network drives phiN, the north velocity's drives phiE.
+
+Schemes (``scheme``):
+
+* ``undamped``: H = 1 throughout (Schuler-tuned, the oscillations never decay);
+* ``fixed``: undamped until ``damp_from_s`` (3 h in the paper), then q = q_fixed, the paper's
+  xi = 0.5 network: q_fixed = 1 + 0.5 / 0.09 = 6.56 from eq. 6 (its pole damping ratio is 0.46);
+* ``adaptive``: as ``fixed``, but each loop's q is min(q_fixed, q_map(|a|)), with q_map the RBF map of
+  :mod:`damping.qmap` (clipped to [1, 7], eq. 12) and a that channel's measured horizontal
+  acceleration: the change of the INS velocity over a step, low-passed with time constant
+  ``accel_tau_s``. The paper's adaptive scheme keeps xi = 0.5 while the acceleration is small (its
+  Fig. 9, where both schemes coincide), hence the min.
+
+On engagement the network's lag states start at the current velocity, so the commanded rate does
+not jump; afterwards q may change at every step (:class:`damping.network.DiscreteNetwork`, discretised
+with scipy.signal.cont2discrete). The vertical channel is held (height fixed): an attitude system
+takes its height from outside. The map is evaluated once on a fine log-spaced grid of acceleration and
+interpolated at each step (within 1e-3 in q of the regressor itself).
+
+Memory: the data are processed step by step and the history is kept once per step (attitude,
+q), so a 20-hour run at 5 Hz holds 72 000 attitudes per run besides its input; :meth:`navigate`
+takes the IMU data as an iterator of chunks (e.g. :func:`fusionbench.imu.simulate_chunks`), so the
+input need not be held either.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from fusionbench import earth
+from fusionbench.aligner import AlignmentResult, initial_attitude
+from fusionbench.imudata import IMUData
+from fusionbench.strapdown import NavState, Strapdown
+
+from . import network, qmap
+
+SCHEMES = ("undamped", "fixed", "adaptive")
+#: Points of the tabulated acceleration -> q map (log-spaced over the map's accepted range).
+MAP_TABLE_POINTS = 4001
+
+
+@lru_cache(maxsize=4)
+def default_map(max_error_deg=0.03):
+    """The acceleration -> q map fitted to :func:`damping.qmap.training_data` on the default grid (cached)."""
+    a = qmap.default_accels()
+    return qmap.QMap().fit(*qmap.training_data(a, max_error=np.radians(max_error_deg)))
+
+
+@lru_cache(maxsize=8)
+def _network(dt, ws):
+    return network.DiscreteNetwork(dt, ws)
+
+
+def q_for_damping(xi):
+    """q giving damping ratio ``xi`` by the paper's fit xi = 0.09 (q - 1) (eq. 6), clipped to [1, 7]."""
+    return float(np.clip(1.0 + float(xi) / 0.09, qmap.Q_MIN, qmap.Q_MAX))
+
+
+class DampedNavigator:
+    """Free-inertial ENU navigation with the seed-004 damping network in both level loops.
+
+    Parameters
+    ----------
+    scheme : {"undamped", "fixed", "adaptive"}
+        Damping scheme (module docstring).
+    damp_from_s : float
+        Time from the start of the data at which the network is switched in, s (3 h in the paper).
+    step_s : float
+        Network step, s; a whole number of IMU samples.
+    xi_fixed : float
+        Damping ratio of the fixed network by eq. 6 (0.5 in the paper).
+    accel_tau_s : float
+        Time constant of the low-pass filter on the measured acceleration, s.
+    max_error_deg : float
+        Peak attitude error the map allows for an acceleration step, deg (0.03 in the paper).
+    qmap_path : str, optional
+        A map saved with :meth:`damping.qmap.QMap.save` to use instead of the default fit.
+    """
+
+    name = "damped-nav"
+    description = "free-inertial navigation with seed 004's damping network (undamped, fixed xi = 0.5, or adaptive q)"
+    min_duration_s = 10.0
+
+    def __init__(self, scheme="adaptive", damp_from_s=3 * 3600.0, step_s=1.0, xi_fixed=0.5, accel_tau_s=10.0,
+                 max_error_deg=0.03, qmap_path=None, release_s=None, accel_source="ins"):
+        if scheme not in SCHEMES:
+            raise ValueError(f"damped-nav scheme: expected one of {SCHEMES}, found {scheme!r}")
+        for key, val in (("damp_from_s", damp_from_s), ("step_s", step_s), ("accel_tau_s", accel_tau_s),
+                         ("max_error_deg", max_error_deg)):
+            if not np.isfinite(val) or val < 0 or (val == 0 and key != "damp_from_s"):
+                raise ValueError(f"damped-nav {key}: expected a positive number, found {val!r}")
+        if not 0 < xi_fixed < 1:
+            raise ValueError(f"damped-nav xi_fixed: expected a damping ratio in (0, 1), found {xi_fixed!r}")
+        self.scheme = scheme
+        self.damp_from_s = float(damp_from_s)
+        self.step_s = float(step_s)
+        self.q_fixed = q_for_damping(xi_fixed)
+        self.accel_tau_s = float(accel_tau_s)
+        if accel_source not in ("ins", "vref"):
+            raise ValueError(f"damped-nav accel_source: expected 'ins' or 'vref', found {accel_source!r}")
+        self.accel_source = accel_source
+        # hold the lowered q until the fixed network's lag pair has forgotten the acceleration:
+        # its memory of a step decays as (1 + t/T) exp(-t/T), to 4 % at 5 T
+        self.release_s = 5.0 * network.time_constant(self.q_fixed) if release_s is None else float(release_s)
+        self.max_error_deg = float(max_error_deg)
+        self.qmap_path = qmap_path
+        self.description = f"{scheme} damping: {self._scheme_text()}"
+
+    def _scheme_text(self):
+        if self.scheme == "undamped":
+            return "Schuler-tuned free inertial navigation, no network"
+        text = f"network from {self.damp_from_s / 3600:g} h, q = {self.q_fixed:.2f} (xi = 0.09 (q - 1) = " \
+               f"{0.09 * (self.q_fixed - 1):.2f}, pole damping {network.damping_from_poles(self.q_fixed):.2f})"
+        if self.scheme == "adaptive":
+            text += f", lowered by the RBF map of the measured acceleration (tau {self.accel_tau_s:g} s) to keep " \
+                    f"the acceleration error under {self.max_error_deg:g} deg"
+        return text
+
+    def map(self):
+        """The acceleration -> q map (:class:`damping.qmap.QMap`)."""
+        return qmap.QMap.load(self.qmap_path) if self.qmap_path else default_map(self.max_error_deg)
+
+    def align(self, imu: IMUData, site, vref=None, init=None) -> AlignmentResult:
+        """Navigate R recordings from the initial attitude ``init``, at rest at ``site``.
+
+        Parameters
+        ----------
+        imu : IMUData
+            Recordings, body RFU; increments or rates.
+        site : fusionbench.aligner.Site
+            Initial latitude, longitude (rad) and height (m); the vehicle starts at rest.
+        vref : ignored
+            Internal damping uses no external velocity.
+        init : ndarray, shape (R, 3, 3) or (3, 3)
+            Initial attitude C_bn (body RFU to ENU), e.g. the result of an alignment.
+
+        Returns
+        -------
+        AlignmentResult
+            Attitude after every network step; ``extra["series"]["q_E"]``, ``["q_N"]`` (R, M) the
+            coefficients of the networks on the east and north velocity (1: not engaged),
+            ``extra["figures"]`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
+        """
+        t, dth, dv = imu.increments()
+        if self.scheme == "adaptive" and self.accel_source == "vref" and vref is None:
+            raise ValueError("damped-nav vref: accel_source 'vref' needs a reference velocity, found none")
+        vref = np.asarray(vref, dtype=float) if vref is not None and self.accel_source == "vref" else None
+        chunk = max(1, int(round(3600.0 / imu.dt)))
+        chunks = ((IMUData(t[k:k + chunk], dth[:, k:k + chunk], dv[:, k:k + chunk], "increment"),
+                   None if vref is None else vref[:, k:k + chunk]) for k in range(0, t.size, chunk))
+        return self.navigate(chunks, site, init, dt=imu.dt, t0=imu.t0, runs=imu.runs)
+
+    def navigate(self, chunks, site, init, dt, t0=0.0, runs=None):
+        """Navigate increments given as an iterator of ``(IMUData, vref)`` chunks, consecutive.
+
+        Each IMUData chunk is of kind ``"increment"``; ``vref`` is the reference velocity (R, n, 3),
+        ENU, m/s, at its samples, or None (needed only with ``accel_source="vref"``). ``dt`` is the
+        sample interval (s) and ``t0`` the time of the initial state (s); each chunk must hold a whole
+        number of network steps except the last (a trailing part step is dropped). Returns what
+        :meth:`align` returns.
+        """
+        if init is None:
+            raise ValueError("damped-nav init: expected an initial attitude C_bn (navigation starts from an "
+                             "alignment), found none")
+        n_sub = int(round(self.step_s / dt))
+        if n_sub < 1 or abs(n_sub * dt - self.step_s) > 1e-6 * self.step_s:
+            raise ValueError(f"damped-nav step_s: expected a whole number of samples of {dt:g} s, found {self.step_s:g} s")
+        loop = None
+        ts, Cs, qs = [], [], []
+        for ch, vref in chunks:
+            t, dth, dv = ch.increments()
+            if loop is None:
+                runs = dth.shape[0] if runs is None else runs
+                loop = _Loop(self, site, initial_attitude(init, runs), dt, n_sub, t0)
+            steps = t.size // n_sub
+            if steps == 0:
+                continue
+            n = steps * n_sub
+            C, q = loop.run(dth[:, :n], dv[:, :n], None if vref is None else vref[:, :n])
+            ts.append(t[n_sub - 1:n:n_sub])
+            Cs.append(C)
+            qs.append(q)
+        if loop is None or not ts:
+            raise ValueError(f"damped-nav data: expected at least one step of {self.step_s:g} s of samples, found none")
+        q = np.concatenate(qs, axis=1)
+        figures = {}
+        if self.scheme != "undamped":
+            figures = {"q_fixed": self.q_fixed, "xi_fixed_poles": network.damping_from_poles(self.q_fixed)}
+        if self.scheme == "adaptive":
+            figures["map_mse"] = float(self.map().mse_)
+        return AlignmentResult(self.name, np.concatenate(ts), np.concatenate(Cs, axis=1),
+                               {"series": {"q_E": q[..., 0], "q_N": q[..., 1]}, "figures": figures})
+
+    def report_figures(self, folder):
+        """Write the network's figures (seed 004 Figs. 4, 5, 6 and 8) into ``folder``; [(file, caption)]."""
+        if self.scheme == "undamped":
+            return []
+        from .figures import theory_figures  # matplotlib only when a report is written
+
+        return theory_figures(folder, self.map() if self.scheme == "adaptive" else None, self.max_error_deg)
+
+
+class _Loop:
+    """State of a damped navigation over a batch of runs between chunks."""
+
+    def __init__(self, nav: DampedNavigator, site, C0, dt, n_sub, t0):
+        runs = C0.shape[0]
+        self.nav, self.n_sub = nav, n_sub
+        self.sd = Strapdown(NavState.broadcast(runs, C0, (0.0, 0.0, 0.0), site.lat, site.lon, site.h), dt,
+                            height_fixed=True)
+        self.net = _network(nav.step_s, float(earth.schuler_frequency(site.lat, site.h)))
+        self.t = float(t0)  # time at the start of the next step
+        self.damped = nav.scheme != "undamped"
+        self.adaptive = nav.scheme == "adaptive"
+        self.use_vref = self.adaptive and nav.accel_source == "vref"
+        self.engaged = False
+        self.x = np.zeros((runs, 2, 2))  # lag states per run, channel (E, N velocity), lag
+        self.a_f = np.zeros((runs, 2))  # low-passed measured acceleration, m/s^2
+        self.a_env = np.zeros((runs, 2))  # its envelope: follows rises at once, decays with release_s
+        self.alpha = 1.0 - np.exp(-nav.step_s / nav.accel_tau_s)
+        self.release = np.exp(-nav.step_s / nav.release_s) if nav.release_s > 0 else 0.0
+        self.v_prev = None  # the velocity the last acceleration was measured from
+        self.q_const = np.full((runs, 2), nav.q_fixed)
+        self.m_const = self.net.matrices(self.q_const)
+        if self.adaptive:
+            m = nav.map()
+            self.log_a = np.linspace(np.log10(qmap.MIN_ACCEL), np.log10(qmap.MAX_ACCEL), MAP_TABLE_POINTS)
+            self.q_tab = np.minimum(m(10.0**self.log_a), nav.q_fixed)
+
+    def _q(self):
+        if not self.adaptive:
+            return self.q_const, self.m_const
+        la = np.log10(np.clip(self.a_env, qmap.MIN_ACCEL, qmap.MAX_ACCEL))
+        q = np.interp(la, self.log_a, self.q_tab)
+        return q, self.net._matrices(q)
+
+    def _track(self, v):
+        """Acceleration input of the adaptive map from the velocity ``v`` (R, 2) at the end of a step."""
+        if self.v_prev is not None:
+            a = (v - self.v_prev) / self.nav.step_s
+            self.a_f += self.alpha * (a - self.a_f)
+            self.a_env = np.maximum(np.abs(self.a_f), self.a_env * self.release)
+        self.v_prev = v
+
+    def run(self, dth, dv, vref=None):
+        """Integrate whole steps; returns the attitude after each step (R, S, 3, 3) and q (R, S, 2).
+
+        ``vref`` (R, n, 3): reference velocity at the samples, for ``accel_source="vref"``."""
+        runs, n, _ = dth.shape
+        ns, step, sd = self.n_sub, self.nav.step_s, self.sd
+        steps = n // ns
+        out_C = np.empty((runs, steps, 3, 3))
+        out_q = np.ones((runs, steps, 2))
+        if self.use_vref:
+            if vref is None:
+                raise ValueError("damped-nav vref: accel_source 'vref' needs a reference velocity, found none")
+            v_ref = vref[:, :steps * ns, :2].reshape(runs, steps, ns, 2).mean(axis=2)  # step means
+        # steps before the network is in: one strapdown call (no feedback to compute)
+        free = 0
+        if not self.engaged:
+            free = steps if not self.damped else int(np.clip(np.ceil((self.nav.damp_from_s - self.t) / step - 1e-9),
+                                                             0, steps))
+        if free:
+            res = sd.run(dth[:, :free * ns], dv[:, :free * ns], record_every=ns)
+            out_C[:, :free] = res["C_bn"]
+            if self.adaptive:
+                v_seq = v_ref if self.use_vref else res["v_n"][..., :2]
+                for j in range(free):
+                    self._track(v_seq[:, j])
+            self.t += free * step
+        cmd = np.zeros((runs, 3))
+        for j in range(free, steps):
+            v = sd.state.v_n[:, :2].copy()
+            if not self.engaged:
+                self.engaged = True
+                self.x[:] = v[:, :, None]  # lags at equilibrium: the damped velocity equals v, no jump
+            q, mats = self._q()
+            v_h, self.x = self.net.step(q, self.x, v, mats)
+            dvh = v_h - v
+            rm, rn = earth.radii(sd.state.lat)
+            cmd[:, 0] = -dvh[:, 1] / (rm + sd.state.h)
+            cmd[:, 1] = dvh[:, 0] / (rn + sd.state.h)
+            cmd[:, 2] = cmd[:, 1] * np.tan(sd.state.lat)
+            out_q[:, j] = q
+            k = j * ns
+            res = sd.run(dth[:, k:k + ns], dv[:, k:k + ns], omega_cmd=cmd, record_every=ns)
+            out_C[:, j] = res["C_bn"][:, 0]
+            if self.adaptive:
+                self._track(v_ref[:, j] if self.use_vref else sd.state.v_n[:, :2].copy())
+            self.t += step
+        return out_C, out_q
