@@ -4,6 +4,8 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
 
 * final error per axis, ``rms`` and ``|mean|``: new > ref * (1 + REL_TOL) + ABS_TOL_ARCMIN;
 * azimuth settling time, mean: new > ref * (1 + REL_TOL) + ABS_TOL_S;
+* level RMSE in the scenario's window (``window_rmse_arcmin``), where the reference has it: as the final error;
+* ``reduction_percent`` of a scenario comparing two methods: new < ref - ABS_TOL_PERCENT;
 * a method of the reference missing from the run.
 
 Same scenario, seed and size give identical numbers on one machine; the tolerances absorb
@@ -18,6 +20,7 @@ from pathlib import Path
 REL_TOL = 0.10
 ABS_TOL_ARCMIN = 0.05
 ABS_TOL_S = 5.0
+ABS_TOL_PERCENT = 5.0
 
 
 def compare(new: dict, ref: dict):
@@ -40,6 +43,16 @@ def compare(new: dict, ref: dict):
         allowed = rv * (1 + REL_TOL) + ABS_TOL_S
         if not nv <= allowed:
             bad.append((name, "settling U mean (s)", rv, nv, allowed))
+        if "window_rmse_arcmin" in r:
+            rv = r["window_rmse_arcmin"]["level"]
+            nv = n.get("window_rmse_arcmin", {}).get("level", float("nan"))
+            allowed = rv * (1 + REL_TOL) + ABS_TOL_ARCMIN
+            if not nv <= allowed:
+                bad.append((name, "window level RMSE (arcmin)", rv, nv, allowed))
+    if "reduction_percent" in ref:
+        rv, nv = ref["reduction_percent"], new.get("reduction_percent", float("nan"))
+        if not nv >= rv - ABS_TOL_PERCENT:
+            bad.append(("-", "reduction (%)", rv, nv, rv - ABS_TOL_PERCENT))
     return bad
 
 

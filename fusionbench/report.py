@@ -22,7 +22,8 @@ from .io import atomic_open  # noqa: E402
 from .runner import write_metrics  # noqa: E402
 
 
-def _save_png(fig, path):
+def save_png(fig, path):
+    """Save a matplotlib figure as PNG atomically and close it."""
     fd, tmp = tempfile.mkstemp(suffix=".png", dir=os.path.dirname(path) or ".")
     os.close(fd)
     try:
@@ -54,7 +55,7 @@ def error_figure(out, path):
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(f"{out.metrics['scenario']}: misalignment, Monte Carlo mean and 1-sigma ({out.metrics['runs']} runs)")
     fig.tight_layout()
-    _save_png(fig, path)
+    save_png(fig, path)
 
 
 def azimuth_figure(out, path):
@@ -84,7 +85,90 @@ def azimuth_figure(out, path):
     full.set_title(f"{out.metrics['scenario']}: azimuth error, {out.metrics['runs']} runs\n"
                    f"above: rms over runs; below: mean and 1 sigma from {t0:g} s", fontsize=10)
     fig.tight_layout()
-    _save_png(fig, path)
+    save_png(fig, path)
+
+
+def level_figure(out, path):
+    """Level misalignment (phiE, phiN, arcmin) against time in hours, Monte Carlo mean of every method, with
+    the scenario's RMSE window shaded (like seed 004's Figs. 9-11)."""
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for name, oc in out.outcomes.items():
+        mean = oc.phi.mean(axis=0) / units.ARCMIN
+        for i, ax in enumerate(axes):
+            ax.plot(oc.t / 3600.0, mean[:, i], lw=1, label=name)
+    win = out.scenario.rmse_window_s
+    for i, ax in enumerate(axes):
+        if win is not None:
+            ax.axvspan(win[0] / 3600.0, win[1] / 3600.0, color="k", alpha=0.08,
+                       label="RMSE window" if i == 0 else None)
+        ax.set_ylabel(f"phi{'EN'[i]} (arcmin)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (h)")
+    fig.suptitle(f"{out.metrics['scenario']}: level errors, mean of {out.metrics['runs']} runs", fontsize=10)
+    fig.tight_layout()
+    save_png(fig, path)
+
+
+def series_figure(out, path):
+    """Series a method reports about itself (e.g. a damping coefficient), mean over runs, against hours."""
+    names = [(n, k) for n, oc in out.outcomes.items() for k in oc.extra.get("series", {})]
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    for n, k in names:
+        oc = out.outcomes[n]
+        ax.plot(oc.t / 3600.0, oc.extra["series"][k].mean(axis=0), lw=1, label=f"{n}: {k}")
+    ax.set_xlabel("time (h)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower left", fontsize=8, ncol=2)
+    ax.set_title(f"{out.metrics['scenario']}: series reported by the methods, mean over runs", fontsize=10)
+    fig.tight_layout()
+    save_png(fig, path)
+
+
+def _window_section(out):
+    m = out.metrics
+    rows = [(n, r) for n, r in m["methods"].items() if "window_rmse_arcmin" in r or "amplitude_arcmin" in r]
+    if not rows:
+        return ""
+    lines = ["## Attitude over the run", ""]
+    win = out.scenario.rmse_window_s
+    amp_names = list(out.scenario.amplitude_windows_s)
+    head = "| method |"
+    if win is not None:
+        head += f" RMSE {win[0]:.0f}-{win[1]:.0f} s: E / N / level |"
+    head += "".join(f" amplitude '{w}' {out.scenario.amplitude_windows_s[w][0]:.0f}-"
+                    f"{out.scenario.amplitude_windows_s[w][1]:.0f} s: E / N |" for w in amp_names)
+    lines += ["Level misalignment, arcmin: RMS over runs and the window's time, and the half peak-to-peak "
+              "in each amplitude window (mean over runs):", "", head, "|---" * (head.count("|") - 1) + "|"]
+    for n, r in rows:
+        row = f"| {n} |"
+        if win is not None:
+            w = r.get("window_rmse_arcmin")
+            row += f" {w['E']:.3f} / {w['N']:.3f} / {w['level']:.3f} |" if w else " - |"
+        for a in amp_names:
+            v = r.get("amplitude_arcmin", {}).get(a)
+            row += f" {v['E']:.3f} / {v['N']:.3f} |" if v else " - |"
+        lines.append(row)
+    if "reduction_percent" in m:
+        base, cand = out.scenario.compare
+        lines += ["", f"Level RMSE in the window: `{base}` {m[f'rmse_{base}_arcmin']:.3f} arcmin, `{cand}` "
+                  f"{m[f'rmse_{cand}_arcmin']:.3f} arcmin; reduction 100 (base - candidate) / base = "
+                  f"**{m['reduction_percent']:.1f} %**."]
+    return "\n".join(lines) + "\n"
+
+
+def _method_figures(out, folder):
+    """Figures the methods draw about themselves (``report_figures(folder)``), once per file name."""
+    seen = {}
+    for name in out.outcomes:
+        try:
+            method = out.scenario.method(name)
+        except ValueError:
+            continue
+        if hasattr(method, "report_figures"):
+            for fname, caption in method.report_figures(folder):
+                seen.setdefault(fname, caption)
+    return seen
 
 
 def _paper_section(out):
@@ -156,6 +240,15 @@ def write_scenario_report(out, folder):
     fig_name = "errors.png"
     error_figure(out, folder / fig_name)
     azimuth_figure(out, folder / "azimuth.png")
+    extra_figs = {}
+    if scn.rmse_window_s is not None or scn.amplitude_windows_s:
+        level_figure(out, folder / "level.png")
+        extra_figs["level.png"] = "level errors against time"
+    if any(oc.extra.get("series") for oc in out.outcomes.values()):
+        series_figure(out, folder / "series.png")
+        extra_figs["series.png"] = "series reported by the methods"
+    extra_figs.update(_method_figures(out, folder))
+    extra_md = "\n".join(f"![{cap}]({f})\n" for f, cap in extra_figs.items())
     level = "\n".join(f"| {n} | {r['level_rms_last_100s_arcmin']['E']:.3f} | {r['level_rms_last_100s_arcmin']['N']:.3f} |"
                       for n, r in m["methods"].items())
     methods_desc = "\n".join(f"- `{n}`: {oc.description}" for n, oc in out.outcomes.items())
@@ -187,6 +280,8 @@ Level errors over the last 100 s, RMS over runs and time (arcmin):
 ![azimuth error vs time](azimuth.png)
 
 {_jump_section(m)}
+{_window_section(out)}
+{extra_md}
 {_paper_section(out)}
 Reproduce: `fusionbench run {m['scenario']} --runs {m['runs']} --seed {m['seed']}{' --quick' if m['quick'] else ''}`
 """

@@ -52,11 +52,31 @@ class RunOutput:
     limits: np.ndarray
 
 
-def _decimate(t, phi):
+def _decimate(t):
+    """Indices of at most HISTORY_POINTS evenly spread samples of ``t``."""
     if t.size <= HISTORY_POINTS:
-        return t, phi
-    idx = np.unique(np.linspace(0, t.size - 1, HISTORY_POINTS).round().astype(int))
-    return t[idx], phi[:, idx]
+        return np.arange(t.size)
+    return np.unique(np.linspace(0, t.size - 1, HISTORY_POINTS).round().astype(int))
+
+
+def _window_figures(scn, t, phi):
+    """Per-run figures over the scenario's windows: mean squares in rmse_window_s (E, N, U, level) and half
+    peak-to-peak in each amplitude window (E, N, U), rad^2 and rad; windows without samples are left out."""
+    out = {}
+    if scn.rmse_window_s is not None:
+        a, b = scn.rmse_window_s
+        sel = (t >= a) & (t <= b)
+        if sel.any():
+            ms = np.mean(phi[:, sel] ** 2, axis=1)
+            out["rmse_ms"] = np.concatenate([ms, ms[:, :2].sum(axis=1, keepdims=True)], axis=1)  # E, N, U, level
+    amp = {}
+    for name, (a, b) in scn.amplitude_windows_s.items():
+        sel = (t >= a) & (t <= b)
+        if sel.any():
+            amp[name] = 0.5 * (phi[:, sel].max(axis=1) - phi[:, sel].min(axis=1))
+    if amp:
+        out["amplitude"] = amp
+    return out
 
 
 def _run_batch(scn, method_names, first_run, runs, seed, duration):
@@ -77,7 +97,8 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
         res = method.align(data, scn.site, vref=vref, init=init)
         wall = time.perf_counter() - t0
         phi = metrics.misalignment_history(res.C_bn, traj.truth(res.t).C_bn)
-        t_h, phi_h = _decimate(res.t, phi)
+        idx = _decimate(res.t)
+        t_h, phi_h = res.t[idx], phi[:, idx]
         last = res.t >= res.t[-1] - LEVEL_WINDOW_S
         level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
         extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1]}
@@ -86,7 +107,11 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
             parts = {"before": res.t < a, "during": (res.t >= a) & (res.t < b), "after": res.t >= b}
             extra["window_ms"] = {k: np.mean(phi[:, sel] ** 2, axis=1) for k, sel in parts.items() if sel.any()}
             extra["peak"] = np.max(np.abs(phi[:, res.t >= a]), axis=1)
-        out[name] = (desc, t_h, phi_h, phi[:, -1], wall, extra)
+        extra.update(_window_figures(scn, res.t, phi))
+        # what a method reports about itself: scalar figures and (R, M) series kept like the history
+        extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.extra.get("series", {}).items()}
+        figures = {k: float(v) for k, v in res.extra.get("figures", {}).items()}
+        out[name] = (desc, t_h, phi_h, phi[:, -1], wall, extra, figures)
     return out
 
 
@@ -155,7 +180,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         desc, t_h = parts[0][0], parts[0][1]
         phi_h = np.concatenate([p[2] for p in parts])
         phi_end = np.concatenate([p[3] for p in parts])
-        extra = {"phi_end": phi_end}
+        extra = {"phi_end": phi_end, "figures": parts[0][6]}
         for key in parts[0][5]:
             val = parts[0][5][key]
             extra[key] = ({k: np.concatenate([p[5][key][k] for p in parts]) for k in val} if isinstance(val, dict)
@@ -192,6 +217,15 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
         if np.all(np.isfinite(sig)):  # filters: actual error over predicted sigma, RMS over runs
             ratio = np.sqrt(np.mean((oc.extra["phi_end"] / sig) ** 2, axis=0))
             out["methods"][name]["consistency_rms_ratio"] = {ax: float(ratio[i]) for i, ax in enumerate("ENU")}
+        entry = out["methods"][name]
+        if "rmse_ms" in oc.extra:
+            rms = np.sqrt(oc.extra["rmse_ms"].mean(axis=0)) / units.ARCMIN
+            entry["window_rmse_arcmin"] = {"window_s": list(scn.rmse_window_s),
+                                           **{ax: float(rms[i]) for i, ax in enumerate(("E", "N", "U", "level"))}}
+        if "amplitude" in oc.extra:
+            entry["amplitude_arcmin"] = {w: {ax: float(np.mean(v[:, i]) / units.ARCMIN) for i, ax in enumerate("ENU")}
+                                         for w, v in oc.extra["amplitude"].items()}
+        entry.update(oc.extra["figures"])
         if scn.jump_window_s is not None:
             a, b = scn.jump_window_s
             after = oc.t >= b
@@ -203,6 +237,15 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
                 "peak_arcmin": {ax: float(oc.extra["peak"][:, i].max() / units.ARCMIN) for i, ax in enumerate("ENU")},
                 "reconverge_s": metrics.stats(reconv),
             }
+    if scn.compare is not None and all(n in out["methods"] and "window_rmse_arcmin" in out["methods"][n]
+                                       for n in scn.compare):
+        base, cand = scn.compare
+        rb = out["methods"][base]["window_rmse_arcmin"]["level"]
+        rc = out["methods"][cand]["window_rmse_arcmin"]["level"]
+        out[f"rmse_{base}_arcmin"] = rb
+        out[f"rmse_{cand}_arcmin"] = rc
+        out["reduction_percent"] = float(100.0 * (rb - rc) / rb) if rb > 0 else 0.0  # seed 004 eq. 14
+        out.update(outcomes[cand].extra["figures"])  # what the candidate reports about itself (e.g. map_mse)
     return out
 
 

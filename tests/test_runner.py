@@ -121,3 +121,70 @@ def test_jump_window_metrics_and_filter_consistency(tmp_path):
     assert j["reconverge_s"]["max_abs"] >= 0.0
     assert set(m["methods"]["kf"]["consistency_rms_ratio"]) == {"E", "N", "U"}
     assert "consistency_rms_ratio" not in m["methods"]["coarse"]  # no predicted sigma, no figure
+
+
+class Wobble:
+    """Test method: the initial guess (the truth, when the scenario's misalignment is zero) turned by
+    phi(t) = [A sin(2 pi t / P), c, 0] (arcmin), so every window figure has a closed form."""
+
+    name = "wobble"
+    description = "known misalignment history"
+    min_duration_s = 1.0
+
+    def __init__(self, amp_arcmin=1.0, offset_arcmin=0.5, period_s=10.0):
+        self.a, self.c, self.p = amp_arcmin * 2.908882086657216e-4, offset_arcmin * 2.908882086657216e-4, period_s
+
+    def align(self, imu, site, vref=None, init=None):
+        from scipy.spatial.transform import Rotation
+
+        from fusionbench.aligner import AlignmentResult
+        t = imu.t
+        phi = np.stack([self.a * np.sin(2 * np.pi * t / self.p), np.full(t.size, self.c), np.zeros(t.size)], -1)
+        C = Rotation.from_rotvec(-phi).as_matrix() @ np.asarray(init)
+        return AlignmentResult(self.name, t, np.broadcast_to(C, (imu.runs,) + C.shape).copy(),
+                               {"figures": {"answer": 42.0}, "series": {"s": np.ones((imu.runs, t.size))}})
+
+
+def test_window_rmse_amplitude_and_comparison_have_their_closed_forms(tmp_path):
+    p = tmp_path / "w.toml"
+    p.write_text(TOML.replace('methods = ["coarse"]', 'methods = ["big", "small"]')
+                 + "[init]\nmisalignment_deg = [0, 0, 0]\n"
+                 "[metrics]\nrmse_window_s = [5.0, 25.0]\namplitude_windows_s = {all = [0.0, 30.0]}\n"
+                 'compare = ["big", "small"]\n'
+                 '[variants.big]\nmethod = "tests.test_runner:Wobble"\namp_arcmin = 2.0\n'
+                 '[variants.small]\nmethod = "tests.test_runner:Wobble"\namp_arcmin = 1.0\n')
+    out = run_scenario(scenarios.load(p), runs=2, seed=0, progress=False)
+    m = out.metrics
+    for name, amp in (("big", 2.0), ("small", 1.0)):
+        r = m["methods"][name]
+        w = r["window_rmse_arcmin"]
+        assert w["E"] == pytest.approx(amp / np.sqrt(2), rel=2e-3) and w["N"] == pytest.approx(0.5, rel=1e-6)
+        assert w["level"] == pytest.approx(np.hypot(amp / np.sqrt(2), 0.5), rel=2e-3)
+        assert r["amplitude_arcmin"]["all"]["E"] == pytest.approx(amp, rel=1e-4)
+        assert r["amplitude_arcmin"]["all"]["N"] == pytest.approx(0.0, abs=1e-9)
+        assert r["answer"] == 42.0
+    rb, rc = np.hypot(2 / np.sqrt(2), 0.5), np.hypot(1 / np.sqrt(2), 0.5)
+    assert m["rmse_big_arcmin"] == pytest.approx(rb, rel=2e-3) and m["rmse_small_arcmin"] == pytest.approx(rc, rel=2e-3)
+    assert m["reduction_percent"] == pytest.approx(100 * (rb - rc) / rb, rel=5e-3)
+    assert m["answer"] == 42.0  # the candidate's own figures are carried to the top
+    write_scenario_report(out, tmp_path / "rep")
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "level.png" in text and "series.png" in text and f"{m['reduction_percent']:.1f} %" in text
+    # the check reads the new figures: a lower reduction or a higher window RMSE regresses
+    worse = json.loads(json.dumps(m))
+    worse["reduction_percent"] -= 6.0
+    worse["methods"]["small"]["window_rmse_arcmin"]["level"] *= 1.2
+    assert [r[1] for r in compare(worse, m)] == ["window level RMSE (arcmin)", "reduction (%)"]
+    assert compare(m, m) == []
+
+
+def test_window_fields_are_validated(tmp_path):
+    p = tmp_path / "w.toml"
+    base = TOML.replace('methods = ["coarse"]', 'methods = ["coarse", "pid"]')
+    for text, field in (("rmse_window_s = [20.0, 40.0]", "metrics.rmse_window_s"),
+                        ('compare = ["coarse", "kf"]\nrmse_window_s = [1.0, 2.0]', "metrics.compare"),
+                        ('compare = ["coarse", "pid"]', "metrics.compare"),
+                        ("amplitude_windows_s = {a = [3.0]}", "metrics.amplitude_windows_s")):
+        p.write_text(base + "[metrics]\n" + text + "\n")
+        with pytest.raises(scenarios.ScenarioError, match=field.replace(".", r"\.")):
+            scenarios.load(p)

@@ -49,6 +49,10 @@ Format (angles in degrees, times in s, sensor figures in the customary units nam
     settling_band_arcmin = 1.0
     zoom_from_s = 100.0         # start of the zoomed azimuth figure
     jump_window_s = [200, 400]  # a noise jump: error RMS before/during/after, peak, re-convergence
+    rmse_window_s = [44200, 49268]   # misalignment RMSE (E, N, U and level) of every method in this window
+    amplitude_windows_s = {before = [0, 10800], after = [16000, 43200]}  # half peak-to-peak per axis
+    compare = ["fixed", "adaptive"]  # baseline and candidate: top-level rmse_<name>_arcmin (level RMSE in
+                                     # rmse_window_s) and reduction_percent = 100 (base - cand) / base
     [variants.adrc-h1-4s]       # a method with options, usable in `methods` by its name
     method = "adrc"
     h1 = 4.0
@@ -82,7 +86,8 @@ _SECTIONS = {
             "accel_bias_ug", "accel_bias_sigma_ug", "vrw_ug_rthz", "accel_scale_ppm"},
     "vref": {"sigma_mps", "schedule"},
     "init": {"misalignment_deg"},
-    "metrics": {"settling_band_arcmin", "zoom_from_s", "jump_window_s"},
+    "metrics": {"settling_band_arcmin", "zoom_from_s", "jump_window_s", "rmse_window_s", "amplitude_windows_s",
+                "compare"},
     "paper": {"reference", "note", "settling_time_s"},
 }
 
@@ -130,6 +135,9 @@ class Scenario:
     paper: dict = field(default_factory=dict)
     zoom_from_s: float = 100.0
     jump_window_s: tuple | None = None
+    rmse_window_s: tuple | None = None
+    amplitude_windows_s: dict = field(default_factory=dict)
+    compare: tuple | None = None
     source: str = ""
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -223,6 +231,35 @@ def _imu_spec(d, src):
     return spec if random else spec.noise_free()
 
 
+def _window(d, key, src, duration, label=None):
+    label = label or "metrics." + key
+    w = d[key]
+    if (not isinstance(w, list) or len(w) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                          for x in w) or not 0 <= w[0] < w[1] <= duration):
+        raise ScenarioError(f"{_where(src, label)}: expected [start, end] with 0 <= start < end <= duration_s, found {w!r}")
+    return (float(w[0]), float(w[1]))
+
+
+def _window_metrics(m, src, duration, methods):
+    """rmse_window_s, amplitude_windows_s and compare of [metrics], validated."""
+    win = _window(m, "rmse_window_s", src, duration) if "rmse_window_s" in m else None
+    amp = m.get("amplitude_windows_s", {})
+    if not isinstance(amp, dict):
+        raise ScenarioError(f"{_where(src, 'metrics.amplitude_windows_s')}: expected a table of name = [start, end], "
+                            f"found {amp!r}")
+    amp = {name: _window(amp, name, src, duration, f"metrics.amplitude_windows_s.{name}") for name in amp}
+    compare = m.get("compare")
+    if compare is not None:
+        if (not isinstance(compare, list) or len(compare) != 2 or not all(isinstance(c, str) for c in compare)
+                or not set(compare) <= set(methods)):
+            raise ScenarioError(f"{_where(src, 'metrics.compare')}: expected two of the scenario's methods "
+                                f"{methods}, found {compare!r}")
+        if win is None:
+            raise ScenarioError(f"{_where(src, 'metrics.compare')}: needs metrics.rmse_window_s, found none")
+        compare = tuple(compare)
+    return win, amp, compare
+
+
 def parse(data: dict, src: str = "<scenario>") -> Scenario:
     """Validate a scenario mapping (as read from TOML) and build a :class:`Scenario`."""
     unknown = set(data) - _TOP
@@ -288,13 +325,15 @@ def parse(data: dict, src: str = "<scenario>") -> Scenario:
         jump = _vec(data["metrics"], "jump_window_s", f"{src} [metrics]", n=2)
         if not 0 < jump[0] < jump[1] < duration:
             raise ScenarioError(f"{_where(src, 'metrics.jump_window_s')}: expected 0 < start < end < duration_s, found {jump}")
+    win, amp_windows, compare = _window_metrics(data.get("metrics", {}), src, duration, methods)
     variants = data.get("variants", {})
     for vname, opts in variants.items():
         if not isinstance(opts, dict) or not isinstance(opts.get("method"), str):
             raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
     paper = data.get("paper", {})
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
-                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, src, data)
+                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, win,
+                    amp_windows, compare, src, data)
 
 
 def load(path) -> Scenario:
