@@ -177,6 +177,18 @@ class Strapdown:
     def runs(self):
         return self.state.C_bn.shape[0]
 
+    def compiled_state(self):
+        """The state arrays :func:`integrate_compiled` updates in place, in its argument order:
+        ``C_bn, v_n, lat, lon, h, v_prev, dtheta_prev, dvel_prev``.
+
+        For loops that feed back into the strapdown every few samples (damping networks, compass
+        loops) written as compiled code: they call ``integrate_compiled(*state, dtheta, dvel, cmd,
+        dt, position_fixed, height_fixed, record_every, out_C, out_v, out_p)`` on consecutive slices,
+        exactly as :meth:`run` does, and this object stays consistent for later :meth:`run` calls.
+        """
+        s = self.state
+        return s.C_bn, s.v_n, s.lat, s.lon, s.h, self._v_prev, self._th_prev, self._dv_prev
+
     def run(self, dtheta, dvel, omega_cmd=None, record_every=1):
         """Integrate a chunk of increments.
 
@@ -376,6 +388,8 @@ def _integrate_kernel(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta,
 
 
 _integrate_serial = numba.njit(cache=True)(_integrate_kernel)
+#: The serial compiled engine, callable from other numba code (see :meth:`Strapdown.compiled_state`).
+integrate_compiled = _integrate_serial
 _integrate_parallel = numba.njit(cache=True, parallel=True)(_integrate_kernel)
 #: Batches smaller than this (runs x samples) run serially: waking threads for a control loop's tiny
 #: steps costs more than it saves, and spinning threads hurt badly on a busy machine.
