@@ -1,1 +1,2 @@
-"""Baseline alignment methods: analytic coarse alignment, and (later) PID gyrocompass, Kalman and factor-graph alignment."""
+"""Baseline alignment methods: analytic coarse alignment, the classical PID gyrocompass, Kalman fine alignment
+(filterpy) and factor-graph alignment (gtsam)."""
