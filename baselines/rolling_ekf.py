@@ -1,0 +1,285 @@
+"""Seed 002's 45-state EKF for continuous rolling self-calibration and self-alignment (method ``rolling-ekf``).
+
+State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]`` of :mod:`fusionbench.platform`: the
+attitude enters as the platform's Euler angles from North-Up-East, not as small misalignment angles,
+so initial attitude errors of several degrees are allowed. Measurements: the three accelerometer
+outputs (m/s^2) every ``filter_s`` (0.2 s). The filter knows its torque commands.
+
+Model (``fusionbench.platform`` module notes)::
+
+    x' = f(x, w_cmd) = [0 (42);  E(angles) w_np^p]
+    w_np^p = w_cmd + KT w_cmd - M_g w_cmd + eps(c, f^p) - C_pn^T w_ie^n        (first order, eq. 19)
+    f^p = g M^T e_U,   M = P C_pn = Rx(phi) Ry(theta) Rz(psi)
+    y = h(x) = K0 + (1 + K1) a + K2 a^2,   a = A(c) f^p
+
+with E the inverse of the Euler-rate matrix B (``w = B [phi', theta', psi']``)::
+
+    phi' = (cos psi w_x - sin psi w_y) / cos theta
+    theta' = sin psi w_x + cos psi w_y
+    psi' = w_z - sin theta phi'
+
+Jacobians (analytic; tests compare them with central finite differences):
+
+* ``H = dh/dx``: I on K0; ``a_j`` on K1_j; ``a_j^2`` on K2_j; ``s_j f_i`` on the accelerometer
+  axis angles (``s = 1 + K1 + 2 K2 a``); ``diag(s) A df^p/dangles`` on the angles, with
+  ``df^p/dalpha = g (dM/dalpha)^T e_U``, ``dM/dphi = [e1 x] M``, ``dM/dtheta = Rx [e2 x] Ry Rz``,
+  ``dM/dpsi = M [e3 x]``.
+* ``F = df/dx`` (angle rows only): ``E dw/dc`` on the coefficients (I on D0; the specific-force terms
+  on D1, D2; ``-w_cmd`` components on the gyro axis angles; ``diag(w_cmd)`` on KT) and
+  ``E dw/dangles + (dE/dangles) w`` on the angles, with ``dw/dangles = J_eps df^p/dangles -
+  (dM/dalpha)^T P w_ie^n`` and the explicit derivatives of the rate relation
+  ``dphi'/dtheta = phi' tan theta``, ``dphi'/dpsi = -theta' / cos theta``, ``dtheta'/dpsi = phi' cos theta``,
+  ``dpsi'/dtheta = -phi' / cos theta``, ``dpsi'/dpsi = theta' tan theta``.
+
+Filter (filterpy :class:`~filterpy.kalman.ExtendedKalmanFilter`, Joseph-form update) on the states
+scaled by their prior standard deviations (``x = D z``; the raw states span 1e-12 rad/s to 0.1 rad,
+too wide for the covariance in float64): the state is propagated over each filter step with 4th-order Runge-Kutta of ``f`` (command held), the covariance
+with ``Phi = I + F T + (F T)^2 / 2``; process noise only on the angles, from the gyros' white drift
+(``E q T E^T``, q the rate noise density, rad^2/s); measurement noise the accelerometers' white noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from fusionbench import earth
+from fusionbench import platform as pf
+
+#: Prior standard deviation of each coefficient group in its customary unit (filter starts at zero),
+#: and of the attitude angles (deg): wide enough for seed 002's Table 1 spreads and a coarse start.
+PRIOR_SIGMA = {"D0": 2.0, "D1": 2.0, "D2": 0.5, "GYRO_MOUNT": 300.0, "K0": 1000.0, "K1": 1000.0, "K2": 50.0,
+               "ACCEL_MOUNT": 300.0, "KT": 1000.0}
+ANGLE_SIGMA_DEG = 5.0
+_E1, _E2, _E3 = np.eye(3)
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _rot(axis, a):
+    c, s = np.cos(a), np.sin(a)
+    if axis == 0:
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == 1:
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _dM(angles):
+    """M = Rx(phi) Ry(theta) Rz(psi) and its three partial derivatives."""
+    Rx, Ry, Rz = _rot(0, angles[0]), _rot(1, angles[1]), _rot(2, angles[2])
+    M = Rx @ Ry @ Rz
+    return M, (_skew(_E1) @ M, Rx @ _skew(_E2) @ Ry @ Rz, M @ _skew(_E3))
+
+
+def _drift_jacobian_f(c, f):
+    """d eps / d f^p (3 x 3) of the drift terms (see :func:`fusionbench.platform.gyro_drift`)."""
+    f0, f1, f2 = f
+    return np.array([
+        [c[3] + c[12] * f1 + c[13] * f2, c[4] + c[12] * f0 + c[14] * f2, c[5] + c[13] * f0 + c[14] * f1],
+        [c[8] + c[16] * f1 + c[17] * f2, c[6] + c[15] * f2 + c[16] * f0, c[7] + c[15] * f1 + c[17] * f0],
+        [c[10] + c[18] * f2 + c[20] * f1, c[11] + c[19] * f2 + c[20] * f0, c[9] + c[18] * f0 + c[19] * f1],
+    ])
+
+
+def _rate_wrt_coeffs(f, w_cmd):
+    """d w_np^p / d coefficients (3 x 42)."""
+    f0, f1, f2 = f
+    J = np.zeros((3, pf.N_COEFFS))
+    J[:, 0:3] = np.eye(3)
+    J[0, 3:6] = f0, f1, f2
+    J[1, 6:9] = f1, f2, f0
+    J[2, 9:12] = f2, f0, f1
+    J[0, 12:15] = f0 * f1, f0 * f2, f1 * f2
+    J[1, 15:18] = f1 * f2, f1 * f0, f2 * f0
+    J[2, 18:21] = f2 * f0, f2 * f1, f0 * f1
+    J[0, 21], J[0, 22] = -w_cmd[1], -w_cmd[2]
+    J[1, 23], J[1, 24] = -w_cmd[0], -w_cmd[2]
+    J[2, 25], J[2, 26] = -w_cmd[0], -w_cmd[1]
+    J[:, 39:42] = np.diag(w_cmd)
+    return J
+
+
+def _rate_inverse(angles):
+    """E with [phi', theta', psi'] = E w."""
+    st, ct = np.sin(angles[1]), np.cos(angles[1])
+    ss, cs = np.sin(angles[2]), np.cos(angles[2])
+    return np.array([[cs / ct, -ss / ct, 0.0], [ss, cs, 0.0], [-st * cs / ct, st * ss / ct, 1.0]])
+
+
+def jacobian_h(x, lat, h=0.0):
+    """dh/dx (3 x 45) at the 45-vector ``x`` (module notes)."""
+    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    g = float(earth.gravity(lat, h))
+    M, dM = _dM(ang)
+    f = g * M[1]  # f^p = g M^T e_U (e_U = NUE y)
+    A = pf.accel_matrix(c)
+    a = A @ f
+    s = 1.0 + c[pf.K1] + 2.0 * c[pf.K2] * a
+    H = np.zeros((3, pf.N_STATES))
+    H[:, pf.K0] = np.eye(3)
+    H[:, pf.K1] = np.diag(a)
+    H[:, pf.K2] = np.diag(a * a)
+    H[1, 36] = s[1] * f[0]
+    H[2, 37], H[2, 38] = s[2] * f[0], s[2] * f[1]
+    df = np.stack([g * d[1] for d in dM], axis=1)  # columns d f^p / d alpha
+    H[:, pf.ANGLES] = (s[:, None] * A) @ df
+    return H
+
+
+def jacobian_f(x, w_cmd, lat, h=0.0):
+    """df/dx (45 x 45) at ``x`` under the command ``w_cmd`` (rad/s, p frame); rows of the coefficients are zero."""
+    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    g = float(earth.gravity(lat, h))
+    w_ie_nue = pf.P_NUE @ earth.earth_rate_n(lat)
+    M, dM = _dM(ang)
+    f = g * M[1]
+    eps = pf.gyro_drift(c, f)
+    w = (1.0 + c[pf.KT]) * w_cmd - (pf.gyro_matrix(c) - np.eye(3)) @ w_cmd + eps - M.T @ w_ie_nue
+    E = _rate_inverse(ang)
+    rates = E @ w
+    dw_da = np.stack([_drift_jacobian_f(c, f) @ (g * d[1]) - d.T @ w_ie_nue for d in dM], axis=1)
+    st, ct = np.sin(ang[1]), np.cos(ang[1])
+    explicit = np.zeros((3, 3))  # d(E w)/d angles with w held
+    explicit[0, 1], explicit[0, 2] = rates[0] * st / ct, -rates[1] / ct
+    explicit[1, 2] = rates[0] * ct
+    explicit[2, 1], explicit[2, 2] = -rates[0] / ct, rates[1] * st / ct
+    F = np.zeros((pf.N_STATES, pf.N_STATES))
+    F[pf.ANGLES, :pf.N_COEFFS] = E @ _rate_wrt_coeffs(f, w_cmd)
+    F[pf.ANGLES, pf.ANGLES] = E @ dw_da + explicit
+    return F
+
+
+def prior_sigma(angle_sigma_deg=ANGLE_SIGMA_DEG, groups=None):
+    """Prior standard deviations of the 45 states, SI (from :data:`PRIOR_SIGMA` in customary units)."""
+    groups = {**PRIOR_SIGMA, **(groups or {})}
+    sig = np.empty(pf.N_STATES)
+    for name, val in groups.items():
+        sl = getattr(pf, name)
+        sig[sl] = val * pf.COEFF_SCALE[sl]
+    sig[pf.ANGLES] = np.radians(angle_sigma_deg)
+    return sig
+
+
+@dataclass
+class CalibrationResult:
+    """What :meth:`RollingEKF.calibrate` returns.
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        Filter times, s.
+    x : ndarray, shape (M, 45)
+        State estimate after each update: 42 coefficients (SI) and the angles (rad).
+    sigma : ndarray, shape (M, 45)
+        Its standard deviations (square roots of the diagonal of P).
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    sigma: np.ndarray
+
+    def final(self, last_s=100.0):
+        """The paper's readout, (45,): coefficients averaged over the last ``last_s`` seconds; the angles
+        at the last filter time (they move with the platform, an average would mix attitudes)."""
+        sel = self.t >= self.t[-1] - last_s
+        out = self.x[sel].mean(axis=0)
+        out[pf.ANGLES] = self.x[-1, pf.ANGLES]
+        return out
+
+
+class RollingEKF:
+    """Seed 002's rolling self-calibration and self-alignment EKF (method ``rolling-ekf``).
+
+    Parameters
+    ----------
+    gyro_noise : float
+        Gyro white drift, standard deviation per simulator sample (rad/s), as in
+        :func:`fusionbench.platform.simulate`.
+    sample_s : float
+        The sample time that ``gyro_noise`` refers to, s (rate noise density ``gyro_noise^2 sample_s``).
+    accel_noise : float
+        Accelerometer output noise, m/s^2 per output.
+    angle_sigma_deg : float
+        Prior standard deviation of the attitude angles, deg.
+    prior : dict, optional
+        Overrides of :data:`PRIOR_SIGMA` (customary units).
+    """
+
+    name = "rolling-ekf"
+    description = "seed 002's 45-state EKF: 42 platform error coefficients and the attitude angles from rolling"
+
+    def __init__(self, gyro_noise=pf.PAPER_GYRO_NOISE, sample_s=0.002, accel_noise=pf.PAPER_ACCEL_NOISE,
+                 angle_sigma_deg=ANGLE_SIGMA_DEG, prior=None):
+        self.q_rate = float(gyro_noise) ** 2 * float(sample_s)
+        self.r = float(accel_noise) ** 2
+        self.sigma0 = prior_sigma(angle_sigma_deg, prior)
+
+    def calibrate(self, t, y, w_cmd, lat, h=0.0, x0=None):
+        """Run the filter over one recording.
+
+        Parameters
+        ----------
+        t : array_like, shape (M,)
+            Filter times, s, uniformly spaced (the first is one step after the initial state).
+        y : array_like, shape (M, 3)
+            Accelerometer outputs at ``t``, m/s^2.
+        w_cmd : array_like, shape (M, 3)
+            Torque command (p frame, rad/s) held over the step ending at each ``t``.
+        lat, h : float
+            Latitude (rad) and height (m).
+        x0 : array_like, shape (45,), optional
+            Initial estimate (default zeros: the paper's start, the platform zeroed on North-Up-East).
+
+        Returns
+        -------
+        CalibrationResult
+        """
+        t = np.asarray(t, dtype=float)
+        y = np.asarray(y, dtype=float)
+        w_cmd = np.asarray(w_cmd, dtype=float)
+        if t.ndim != 1 or t.size < 2:
+            raise ValueError(f"t: expected at least two filter times, found shape {t.shape}")
+        if y.shape != (t.size, 3) or w_cmd.shape != (t.size, 3):
+            raise ValueError(f"y, w_cmd: expected shape ({t.size}, 3), found {y.shape} and {w_cmd.shape}")
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(w_cmd))):
+            raise ValueError("y, w_cmd: expected finite values, found NaN or inf")
+        dt = float(t[1] - t[0])
+        # the filter runs on the states scaled by their prior sigmas (x = D z): the raw states span
+        # 1e-12 rad/s to 0.1 rad and their covariance would lose positive definiteness in float64
+        D = self.sigma0
+        kf = ExtendedKalmanFilter(dim_x=pf.N_STATES, dim_z=3)
+        x0 = np.zeros(pf.N_STATES) if x0 is None else np.asarray(x0, dtype=float)
+        kf.x = (x0 / D).reshape(-1, 1)
+        kf.P = np.eye(pf.N_STATES)
+        kf.R = self.r * np.eye(3)
+        I = np.eye(pf.N_STATES)
+        xs = np.empty((t.size, pf.N_STATES))
+        sig = np.empty((t.size, pf.N_STATES))
+        for k in range(t.size):
+            x = kf.x[:, 0] * D
+            F = jacobian_f(x, w_cmd[k], lat, h) * dt * D[None, :] / D[:, None]
+            Phi = I + F + 0.5 * F @ F
+            E = _rate_inverse(x[pf.ANGLES]) / D[pf.ANGLES, None]
+            kf.x = (_rk4(x, w_cmd[k], dt, lat, h) / D).reshape(-1, 1)
+            kf.P = Phi @ kf.P @ Phi.T
+            kf.P[pf.ANGLES, pf.ANGLES] += self.q_rate * dt * E @ E.T
+            kf.update(y[k].reshape(3, 1), lambda z: jacobian_h(z[:, 0] * D, lat, h) * D[None, :],
+                      lambda z: pf.measurement(z[:, 0] * D, lat, h).reshape(3, 1))
+            kf.P = 0.5 * (kf.P + kf.P.T)
+            xs[k] = kf.x[:, 0] * D
+            sig[k] = np.sqrt(np.diag(kf.P)) * D
+        return CalibrationResult(t, xs, sig)
+
+
+def _rk4(x, w_cmd, dt, lat, h):
+    f = lambda s: pf.state_derivative(s, w_cmd, lat, h)  # noqa: E731
+    k1 = f(x)
+    k2 = f(x + 0.5 * dt * k1)
+    k3 = f(x + 0.5 * dt * k2)
+    k4 = f(x + dt * k3)
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
