@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
+from scipy.spatial.transform import Rotation
 
 from fusionbench import earth
 from fusionbench import platform as pf
@@ -154,6 +155,43 @@ def jacobian_f(x, w_cmd, lat, h=0.0):
     return F
 
 
+def error_jacobians(x, w_cmd, lat, h=0.0):
+    """Jacobians of the error-state model the filter's covariance lives in, ``(F_e (45, 45), H_e (3, 45))``.
+
+    Error state ``e = [c_true - c_est (42), eta (3)]`` with ``C_true = (I - [eta x]) C_est`` (eta a small
+    rotation in n, rad): ``eta' = -C J_c dc... `` (module notes, "Error-state covariance")."""
+    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    g = float(earth.gravity(lat, h))
+    C = pf.angles_to_dcm(ang)
+    f_n = np.array([0.0, 0.0, g])
+    f = C.T @ f_n
+    Sf = _skew(f_n)
+    F = np.zeros((pf.N_STATES, pf.N_STATES))
+    F[pf.ANGLES, :pf.N_COEFFS] = -C @ _rate_wrt_coeffs(f, w_cmd)
+    F[pf.ANGLES, pf.ANGLES] = C @ _drift_jacobian_f(c, f) @ C.T @ Sf - _skew(earth.earth_rate_n(lat))
+    A = pf.accel_matrix(c)
+    a = A @ f
+    s = 1.0 + c[pf.K1] + 2.0 * c[pf.K2] * a
+    H = jacobian_h(x, lat, h)
+    H[:, pf.ANGLES] = -(s[:, None] * A) @ C.T @ Sf
+    return F, H
+
+
+def level(y_mean):
+    """Attitude angles levelled from the mean accelerometer outputs ``y_mean`` (m/s^2, ~ f^p), azimuth
+    theta = 0: phi and psi put gravity on ``y_mean``'s direction.
+
+    Why: gravity fixes two of the three angles; started from angles off in tilt by degrees, the EKF
+    linearises the unobservable rotation about the true vertical at the wrong tangent, reads the azimuth
+    as observed and locks it degrees off with a tiny sigma (measured: theta 3 deg off, sigma 0.005 deg
+    after 1 s). Levelled first, only the azimuth is off, along the direction the filter sees as unobserved.
+    With theta = 0, ``f^p / g = [sin psi cos phi, cos psi cos phi, -sin phi]``.
+    """
+    u = np.asarray(y_mean, dtype=float)
+    u = u / np.linalg.norm(u)
+    return np.array([-np.arcsin(np.clip(u[2], -1, 1)), 0.0, np.arctan2(u[0], u[1])])
+
+
 def prior_sigma(angle_sigma_deg=ANGLE_SIGMA_DEG, groups=None):
     """Prior standard deviations of the 45 states, SI (from :data:`PRIOR_SIGMA` in customary units)."""
     groups = {**PRIOR_SIGMA, **(groups or {})}
@@ -208,16 +246,19 @@ class RollingEKF:
         Prior standard deviation of the attitude angles, deg.
     prior : dict, optional
         Overrides of :data:`PRIOR_SIGMA` (customary units).
+    level_s : float
+        Seconds of outputs averaged for the initial levelling when no ``x0`` is given.
     """
 
     name = "rolling-ekf"
     description = "seed 002's 45-state EKF: 42 platform error coefficients and the attitude angles from rolling"
 
     def __init__(self, gyro_noise=pf.PAPER_GYRO_NOISE, sample_s=0.002, accel_noise=pf.PAPER_ACCEL_NOISE,
-                 angle_sigma_deg=ANGLE_SIGMA_DEG, prior=None):
+                 angle_sigma_deg=ANGLE_SIGMA_DEG, prior=None, level_s=1.0):
         self.q_rate = float(gyro_noise) ** 2 * float(sample_s)
         self.r = float(accel_noise) ** 2
         self.sigma0 = prior_sigma(angle_sigma_deg, prior)
+        self.level_s = float(level_s)
 
     def calibrate(self, t, y, w_cmd, lat, h=0.0, x0=None):
         """Run the filter over one recording.
@@ -233,7 +274,8 @@ class RollingEKF:
         lat, h : float
             Latitude (rad) and height (m).
         x0 : array_like, shape (45,), optional
-            Initial estimate (default zeros: the paper's start, the platform zeroed on North-Up-East).
+            Initial estimate. Default: zero coefficients (the paper's start) and the attitude levelled
+            from the first ``level_s`` of outputs with theta (azimuth) 0 (:func:`level`).
 
         Returns
         -------
@@ -249,31 +291,64 @@ class RollingEKF:
         if not (np.all(np.isfinite(y)) and np.all(np.isfinite(w_cmd))):
             raise ValueError("y, w_cmd: expected finite values, found NaN or inf")
         dt = float(t[1] - t[0])
-        # the filter runs on the states scaled by their prior sigmas (x = D z): the raw states span
-        # 1e-12 rad/s to 0.1 rad and their covariance would lose positive definiteness in float64
+        if x0 is None:
+            x0 = np.zeros(pf.N_STATES)
+            x0[pf.ANGLES] = level(y[t - t[0] < self.level_s].mean(axis=0))
+        x = np.array(x0, dtype=float)
+        # covariance of the error state, scaled by the prior sigmas (e = D z): the raw errors span 1e-12
+        # rad/s to 0.1 rad, too wide for a positive-definite covariance in float64
         D = self.sigma0
         kf = ExtendedKalmanFilter(dim_x=pf.N_STATES, dim_z=3)
-        x0 = np.zeros(pf.N_STATES) if x0 is None else np.asarray(x0, dtype=float)
-        kf.x = (x0 / D).reshape(-1, 1)
         kf.P = np.eye(pf.N_STATES)
         kf.R = self.r * np.eye(3)
         I = np.eye(pf.N_STATES)
+        q_eta = self.q_rate * dt / D[pf.ANGLES] ** 2  # gyro white drift as rotation noise in n
+        g = float(earth.gravity(lat, h))
         xs = np.empty((t.size, pf.N_STATES))
         sig = np.empty((t.size, pf.N_STATES))
         for k in range(t.size):
-            x = kf.x[:, 0] * D
-            F = jacobian_f(x, w_cmd[k], lat, h) * dt * D[None, :] / D[:, None]
-            Phi = I + F + 0.5 * F @ F
-            E = _rate_inverse(x[pf.ANGLES]) / D[pf.ANGLES, None]
-            kf.x = (_rk4(x, w_cmd[k], dt, lat, h) / D).reshape(-1, 1)
+            Fe, _ = error_jacobians(x, w_cmd[k], lat, h)
+            Fs = Fe * dt * D[None, :] / D[:, None]
+            Phi = I + Fs + 0.5 * Fs @ Fs
+            x = _rk4(x, w_cmd[k], dt, lat, h)
             kf.P = Phi @ kf.P @ Phi.T
-            kf.P[pf.ANGLES, pf.ANGLES] += self.q_rate * dt * E @ E.T
-            kf.update(y[k].reshape(3, 1), lambda z: jacobian_h(z[:, 0] * D, lat, h) * D[None, :],
-                      lambda z: pf.measurement(z[:, 0] * D, lat, h).reshape(3, 1))
+            kf.P[pf.ANGLES, pf.ANGLES] += np.diag(q_eta)
+            _, He = error_jacobians(x, w_cmd[k], lat, h)
+            Hs = He * D[None, :]
+            kf.x = np.zeros((pf.N_STATES, 1))
+            # second-order term of h in the attitude error eta (the second-order EKF's added variance):
+            # f^p changes by C^T (eta x (eta x f^n)) / 2 = g C^T (eta_h eta_U - |eta_h|^2 e_U) / 2 (eta_h the
+            # tilt, eta_U the azimuth part); while the attitude is degrees off this is tens of ug, and
+            # without it the 1-ug outputs make the filter trust the wrong linearisation (it diverges)
+            Pe = kf.P[pf.ANGLES, pf.ANGLES] * np.outer(D[pf.ANGLES], D[pf.ANGLES])
+            s_h2, s_v2 = Pe[0, 0] + Pe[1, 1], Pe[2, 2]
+            kf.R = (self.r + g * g * (s_h2 * s_v2 + s_h2 * s_h2)) * np.eye(3)
+            kf.update((y[k] - pf.measurement(x, lat, h)).reshape(3, 1), lambda z: Hs, lambda z: Hs @ z)
             kf.P = 0.5 * (kf.P + kf.P.T)
-            xs[k] = kf.x[:, 0] * D
-            sig[k] = np.sqrt(np.diag(kf.P)) * D
+            x = _apply(x, kf.x[:, 0] * D)
+            xs[k] = x
+            sig[k] = _sigmas(x, kf.P, D)
         return CalibrationResult(t, xs, sig)
+
+
+def _apply(x, e):
+    """Nominal state corrected by the estimated error ``e`` (coefficients added, attitude turned by
+    ``C <- (I - [eta x]) C``); the angles stay continuous (no wrap at +-180 deg)."""
+    out = x.copy()
+    out[:pf.N_COEFFS] += e[:pf.N_COEFFS]
+    C = Rotation.from_rotvec(-e[pf.ANGLES]).as_matrix() @ pf.angles_to_dcm(x[pf.ANGLES])
+    a = pf.dcm_to_angles(C)
+    out[pf.ANGLES] = x[pf.ANGLES] + (a - x[pf.ANGLES] + np.pi) % (2 * np.pi) - np.pi
+    return out
+
+
+def _sigmas(x, P, D):
+    """Standard deviations of the 45 states from the scaled error covariance; the angles' through
+    ``d angles = -E C^T eta`` (a rotation eta in n seen by the Euler angles)."""
+    sig = np.sqrt(np.diag(P)) * D
+    J = -_rate_inverse(x[pf.ANGLES]) @ pf.angles_to_dcm(x[pf.ANGLES]).T * D[None, pf.ANGLES]
+    sig[pf.ANGLES] = np.sqrt(np.diag(J @ P[pf.ANGLES, pf.ANGLES] @ J.T))
+    return sig
 
 
 def _rk4(x, w_cmd, dt, lat, h):

@@ -41,6 +41,34 @@ def test_jacobians_match_central_differences(angles):
         assert np.array_equal(np.abs(A).max(axis=0) > 0, np.abs(An).max(axis=0) > 1e-20)  # same structure
 
 
+def test_error_state_jacobians_match_central_differences():
+    """The covariance's model: e = [c_true - c_est, eta], C_true = (I - [eta x]) C_est. H_e against central
+    differences of h; F_e against the misalignment between two attitudes propagated 1 ms apart."""
+    from scipy.spatial.transform import Rotation
+    x = _state(1, (20.0, 3.0, -40.0))
+    w = np.radians([0.1, -0.05, 0.02])
+    F, H = R.error_jacobians(x, w, LAT)
+    sig = R.prior_sigma()
+    dt = 0.01  # long enough that the propagated misalignment stands well above rounding
+
+    def eta_after(e):
+        xt, xe = R._rk4(R._apply(x, e), w, dt, LAT, 0.0), R._rk4(x, w, dt, LAT, 0.0)
+        Ct, Ce = pf.angles_to_dcm(xt[pf.ANGLES]), pf.angles_to_dcm(xe[pf.ANGLES])
+        return -Rotation.from_matrix(Ct @ Ce.T).as_rotvec()
+
+    for i in range(pf.N_STATES):
+        e = np.zeros(pf.N_STATES)
+        e[i] = 1e-4 * sig[i]
+        col = (pf.measurement(R._apply(x, e), LAT) - pf.measurement(R._apply(x, -e), LAT)) / (2 * e[i])
+        assert np.abs(col - H[:, i]).max() <= 1e-6 * np.abs(H).max()  # the azimuth column: rounding only
+        e[i] = 1e-2 * sig[i]
+        d = (eta_after(e) - eta_after(-e)) / (2 * e[i])
+        expect = (np.eye(pf.N_STATES)[i, pf.ANGLES] if i >= pf.N_COEFFS else 0.0) + F[pf.ANGLES, i] * dt
+        assert np.abs(d - expect).max() <= max(1e-3 * np.abs(F[pf.ANGLES, i] * dt).max(), 1e-12)
+    # a rotation about the vertical is invisible to the accelerometers, whatever the estimate
+    assert np.abs(H[:, pf.N_COEFFS + 2]).max() < 1e-12
+
+
 def test_filter_started_on_the_truth_of_a_noise_free_run_stays_on_it():
     c = _state(2, (0.0, 0.0, 0.0))[:pf.N_COEFFS]
     # without gyro axis angles the filter's first-order platform rate (eq. 19) is exact; with them the
