@@ -159,22 +159,40 @@ def error_jacobians(x, w_cmd, lat, h=0.0):
     """Jacobians of the error-state model the filter's covariance lives in, ``(F_e (45, 45), H_e (3, 45))``.
 
     Error state ``e = [c_true - c_est (42), eta (3)]`` with ``C_true = (I - [eta x]) C_est`` (eta a small
-    rotation in n, rad): ``eta' = -C J_c dc... `` (module notes, "Error-state covariance")."""
+    rotation in n, rad); see the module notes, "Error-state covariance"."""
+    return error_F(x, w_cmd, lat, h), error_H(x, lat, h)
+
+
+def error_F(x, w_cmd, lat, h=0.0):
+    """d e / dt = F_e e (45 x 45): ``eta' = -C J_c dc + C J_eps C^T [f^n x] eta - [w_ie^n x] eta``."""
     c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
     g = float(earth.gravity(lat, h))
     C = pf.angles_to_dcm(ang)
-    f_n = np.array([0.0, 0.0, g])
-    f = C.T @ f_n
-    Sf = _skew(f_n)
+    f = C.T @ np.array([0.0, 0.0, g])
     F = np.zeros((pf.N_STATES, pf.N_STATES))
     F[pf.ANGLES, :pf.N_COEFFS] = -C @ _rate_wrt_coeffs(f, w_cmd)
-    F[pf.ANGLES, pf.ANGLES] = C @ _drift_jacobian_f(c, f) @ C.T @ Sf - _skew(earth.earth_rate_n(lat))
+    F[pf.ANGLES, pf.ANGLES] = C @ _drift_jacobian_f(c, f) @ C.T @ _skew([0.0, 0.0, g]) - _skew(earth.earth_rate_n(lat))
+    return F
+
+
+def error_H(x, lat, h=0.0):
+    """Output error = H_e e (3 x 45): the coefficient columns of :func:`jacobian_h`, and
+    ``-diag(s) A C^T [f^n x]`` on eta (its vertical column is zero: a turn about the vertical is unseen)."""
+    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    g = float(earth.gravity(lat, h))
+    C = pf.angles_to_dcm(ang)
+    f = C.T @ np.array([0.0, 0.0, g])
     A = pf.accel_matrix(c)
     a = A @ f
     s = 1.0 + c[pf.K1] + 2.0 * c[pf.K2] * a
-    H = jacobian_h(x, lat, h)
-    H[:, pf.ANGLES] = -(s[:, None] * A) @ C.T @ Sf
-    return F, H
+    H = np.zeros((3, pf.N_STATES))
+    H[:, pf.K0] = np.eye(3)
+    H[:, pf.K1] = np.diag(a)
+    H[:, pf.K2] = np.diag(a * a)
+    H[1, 36] = s[1] * f[0]
+    H[2, 37], H[2, 38] = s[2] * f[0], s[2] * f[1]
+    H[:, pf.ANGLES] = -(s[:, None] * A) @ C.T @ _skew([0.0, 0.0, g])
+    return H
 
 
 def level(y_mean):
@@ -307,13 +325,13 @@ class RollingEKF:
         xs = np.empty((t.size, pf.N_STATES))
         sig = np.empty((t.size, pf.N_STATES))
         for k in range(t.size):
-            Fe, _ = error_jacobians(x, w_cmd[k], lat, h)
+            Fe = error_F(x, w_cmd[k], lat, h)
             Fs = Fe * dt * D[None, :] / D[:, None]
             Phi = I + Fs + 0.5 * Fs @ Fs
             x = _rk4(x, w_cmd[k], dt, lat, h)
             kf.P = Phi @ kf.P @ Phi.T
             kf.P[pf.ANGLES, pf.ANGLES] += np.diag(q_eta)
-            _, He = error_jacobians(x, w_cmd[k], lat, h)
+            He = error_H(x, lat, h)
             Hs = He * D[None, :]
             kf.x = np.zeros((pf.N_STATES, 1))
             # second-order term of h in the attitude error eta (the second-order EKF's added variance):
@@ -323,7 +341,7 @@ class RollingEKF:
             Pe = kf.P[pf.ANGLES, pf.ANGLES] * np.outer(D[pf.ANGLES], D[pf.ANGLES])
             s_h2, s_v2 = Pe[0, 0] + Pe[1, 1], Pe[2, 2]
             kf.R = (self.r + g * g * (s_h2 * s_v2 + s_h2 * s_h2)) * np.eye(3)
-            kf.update((y[k] - pf.measurement(x, lat, h)).reshape(3, 1), lambda z: Hs, lambda z: Hs @ z)
+            kf.update((y[k] - pf.measurement_unchecked(x, g)).reshape(3, 1), lambda z: Hs, lambda z: Hs @ z)
             kf.P = 0.5 * (kf.P + kf.P.T)
             x = _apply(x, kf.x[:, 0] * D)
             xs[k] = x
@@ -352,7 +370,8 @@ def _sigmas(x, P, D):
 
 
 def _rk4(x, w_cmd, dt, lat, h):
-    f = lambda s: pf.state_derivative(s, w_cmd, lat, h)  # noqa: E731
+    g, w_ie = float(earth.gravity(lat, h)), earth.earth_rate_n(lat)
+    f = lambda s: pf.state_derivative_unchecked(s, w_cmd, g, w_ie)  # noqa: E731
     k1 = f(x)
     k2 = f(x + 0.5 * dt * k1)
     k3 = f(x + 0.5 * dt * k2)

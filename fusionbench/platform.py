@@ -320,7 +320,11 @@ def angles_to_dcm(angles):
 
     ``P_NUE @ C_pn = Rx(phi) Ry(theta) Rz(psi)`` (see the module notes).
     """
-    a = _check_vec(angles, "angles")
+    return _angles_dcm(_check_vec(angles, "angles"))
+
+
+def _angles_dcm(a):
+    """:func:`angles_to_dcm` without input checks (for the filter's inner loop)."""
     sf, cf = np.sin(a[..., 0]), np.cos(a[..., 0])
     st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
     ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
@@ -374,8 +378,11 @@ def angle_rates(angles, w_np_p):
     w_np_p : array_like, shape (..., 3)
         Angular rate of p relative to n, resolved in p, rad/s.
     """
-    a = _check_vec(angles, "angles")
-    w = _check_vec(w_np_p, "w_np_p")
+    return _angle_rates(_check_vec(angles, "angles"), _check_vec(w_np_p, "w_np_p"))
+
+
+def _angle_rates(a, w):
+    """:func:`angle_rates` without input checks."""
     st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
     ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
     dphi = (cs * w[..., 0] - ss * w[..., 1]) / ct
@@ -551,8 +558,15 @@ def measurement(state, lat, h=0.0):
         ``y`` of the X, Y, Z accelerometers, m/s^2.
     """
     x = _check_coeffs(state, "state", N_STATES)
-    C = angles_to_dcm(x[..., ANGLES])
-    return accel_output(x[..., :N_COEFFS], specific_force_p(C, lat, h))
+    lat, h = _check_site(lat, h)
+    return measurement_unchecked(x, float(earth.gravity(lat, h)))
+
+
+def measurement_unchecked(x, g):
+    """:func:`measurement` for a checked state and gravity ``g`` (m/s^2): no input checks (inner loops)."""
+    f = g * _angles_dcm(x[..., ANGLES])[..., 2, :]
+    c = np.moveaxis(x, -1, 0)
+    return np.stack(np.broadcast_arrays(*_accel_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
 
 
 def state_derivative(state, w_cmd_p, lat, h=0.0):
@@ -576,9 +590,23 @@ def state_derivative(state, w_cmd_p, lat, h=0.0):
         Zeros for the coefficients, then ``[phi', theta', psi']`` in rad/s.
     """
     x = _check_coeffs(state, "state", N_STATES)
+    w = _check_vec(w_cmd_p, "w_cmd_p")
+    lat, h = _check_site(lat, h)
+    return state_derivative_unchecked(x, w, float(earth.gravity(lat, h)), earth.earth_rate_n(lat))
+
+
+def state_derivative_unchecked(x, w, g, w_ie_n):
+    """:func:`state_derivative` for checked inputs, gravity ``g`` and earth rate ``w_ie_n`` (ENU): no
+    input checks (the filter's Runge-Kutta steps)."""
     ang = x[..., ANGLES]
-    w_np = _relative_rate(x[..., :N_COEFFS], angles_to_dcm(ang), w_cmd_p, lat, h, exact=False)
-    rates = angle_rates(ang, w_np)
+    C = _angles_dcm(ang)
+    f = g * C[..., 2, :]
+    c = np.moveaxis(x, -1, 0)
+    eps = np.stack(np.broadcast_arrays(*_drift_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
+    Mg_w = np.stack([c[21] * w[..., 1] + c[22] * w[..., 2], c[23] * w[..., 0] + c[24] * w[..., 2],
+                     c[25] * w[..., 0] + c[26] * w[..., 1]], axis=-1)
+    w_np = (1.0 + x[..., KT]) * w - Mg_w + eps - np.einsum("...ji,j->...i", C, w_ie_n)
+    rates = _angle_rates(ang, w_np)
     out = np.zeros(np.broadcast_shapes(x.shape[:-1], rates.shape[:-1]) + (N_STATES,))
     out[..., ANGLES] = rates
     return out
