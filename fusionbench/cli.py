@@ -52,6 +52,11 @@ def _cmd_list(args):
     print("methods:")
     for name, ep in sorted(available_methods().items()):
         print(f"  {name:<28} {getattr(ep.load(), 'description', '')}")
+    from .calibration import available_calibrators
+
+    print("calibration methods (platform experiments):")
+    for name, ep in sorted(available_calibrators().items()):
+        print(f"  {name:<28} {getattr(ep.load(), 'description', '')}")
     return 0
 
 

@@ -140,7 +140,12 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     Returns
     -------
     RunOutput
+        Or :class:`fusionbench.calibration.CalibrationOutput` for a platform-rolling scenario.
     """
+    if scn.experiment == "platform-rolling":
+        from .calibration import run_calibration
+
+        return run_calibration(scn, methods, runs, seed, quick, n_jobs)
     methods = list(methods or scn.methods)
     for m in methods:  # fail early, with the method's own message
         scn.method(m)

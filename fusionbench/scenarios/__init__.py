@@ -75,7 +75,10 @@ from .. import attitude, imu, trajectory, units
 from ..aligner import Site, load_method
 
 _TOP = {"name", "description", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
-        "motion", "imu", "vref", "init", "metrics", "variants", "paper"}
+        "motion", "imu", "vref", "init", "metrics", "variants", "paper", "experiment", "platform"}
+#: Experiment kinds: alignment (the default: IMU data to aligners) and the platform self-calibration of
+#: seed 002 (a ``[platform]`` table, methods from the ``fusionbench.calibrators`` group).
+EXPERIMENTS = ("alignment", "platform-rolling")
 _SECTIONS = {
     "quick": {"duration_s", "runs"},
     "site": {"lat_deg", "lon_deg", "height_m"},
@@ -138,6 +141,8 @@ class Scenario:
     rmse_window_s: tuple | None = None
     amplitude_windows_s: dict = field(default_factory=dict)
     compare: tuple | None = None
+    experiment: str = "alignment"
+    platform: object = None
     source: str = ""
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -161,6 +166,15 @@ class Scenario:
             return None
         C_n_nprime = attitude.euler_platform_to_dcm(np.radians(self.init_misalignment))
         return C_n_nprime @ C_bn_true
+
+    def calibrator(self, name):
+        """Instantiate a calibration method (platform experiments) by variant name, registered name or path."""
+        from ..calibration import load_calibrator
+
+        if name in self.variants:
+            options = dict(self.variants[name])
+            return load_calibrator(options.pop("method"), **options)
+        return load_calibrator(name)
 
     def method(self, name):
         """Instantiate a method by scenario variant name, registered name or ``module:Class`` path."""
@@ -331,9 +345,25 @@ def parse(data: dict, src: str = "<scenario>") -> Scenario:
         if not isinstance(opts, dict) or not isinstance(opts.get("method"), str):
             raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
     paper = data.get("paper", {})
+    experiment = data.get("experiment", "alignment")
+    if experiment not in EXPERIMENTS:
+        raise ScenarioError(f"{_where(src, 'experiment')}: expected one of {EXPERIMENTS}, found {experiment!r}")
+    plat = None
+    if experiment == "platform-rolling":
+        from ..calibration import parse_platform
+
+        if not isinstance(data.get("platform"), dict):
+            raise ScenarioError(f"{_where(src, 'platform')}: expected a [platform] table, found {data.get('platform')!r}")
+        try:
+            plat = parse_platform(data["platform"], src)
+        except ValueError as exc:
+            raise ScenarioError(str(exc)) from None
+        total = sum(sg.duration for sg in plat.scheme.segments)
+        if abs(total - duration) > 1e-6:
+            raise ScenarioError(f"{_where(src, 'duration_s')}: expected the scheme's length {total:g} s, found {duration:g}")
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
                     site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, win,
-                    amp_windows, compare, src, data)
+                    amp_windows, compare, experiment, plat, src, data)
 
 
 def load(path) -> Scenario:

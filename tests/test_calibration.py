@@ -1,0 +1,92 @@
+"""Platform self-calibration experiments: the [platform] table, determinism, metrics and report."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fusionbench import platform as pf
+from fusionbench import scenarios
+from fusionbench.calibration import draw_truth
+from fusionbench.check import compare
+from fusionbench.report import write_scenario_report
+from fusionbench.runner import run_scenario
+
+TOML = """
+name = "tiny-rolling"
+experiment = "platform-rolling"
+duration_s = 120.0
+rate_hz = 5.0
+runs = 2
+methods = ["rolling-ekf"]
+[site]
+lat_deg = 34.0
+[platform]
+scheme = [{axis = "south", rate_dps = 0.5, duration_s = 60.0}, {axis = "east", rate_dps = 0.5, duration_s = 60.0}]
+initial_angles_deg = [1.0, 2.0, 3.0]
+initial_angles_sigma_deg = [0.1, 0.1, 0.1]
+coeff_mean = {D0 = 1.0, K0 = 100.0}
+coeff_sigma = {D0 = 0.2, K0 = 10.0}
+"""
+
+
+def _load(tmp_path, text=TOML):
+    p = tmp_path / "r.toml"
+    p.write_text(text)
+    return scenarios.load(p)
+
+
+def test_paper_scenario_loads_with_the_papers_scheme():
+    scn = scenarios.get("paper002-rolling")
+    assert scn.experiment == "platform-rolling"
+    segs = scn.platform.scheme.segments
+    assert [s.duration for s in segs] == [1800.0, 900.0, 1800.0, 900.0]
+    assert segs[0].axis == (0.0, -1.0, 0.0) and segs[1].axis == (1.0, 0.0, 0.0)
+    assert segs[0].rate == pytest.approx(np.radians(0.1))
+    quick = scn.platform.scaled(900.0)
+    assert sum(s.duration for s in quick.scheme.segments) == pytest.approx(900.0)
+
+
+def test_truth_depends_on_seed_and_run_only(tmp_path):
+    spec = _load(tmp_path).platform
+    c0, a0 = draw_truth(spec, 5, 1)
+    c1, a1 = draw_truth(spec, 5, 1)
+    assert np.array_equal(c0, c1) and np.array_equal(a0, a1)
+    assert not np.array_equal(c0, draw_truth(spec, 5, 2)[0])
+    # drawn from the table: gyro bias around 1 deg/h, accelerometer bias around 100 ug, others zero
+    c = np.stack([draw_truth(spec, 0, k)[0] for k in range(400)])
+    assert np.mean(c[:, pf.D0]) / pf.COEFF_SCALE[0] == pytest.approx(1.0, abs=0.05)
+    assert np.std(c[:, pf.K0]) / pf.COEFF_SCALE[27] == pytest.approx(10.0, rel=0.15)
+    assert np.all(c[:, pf.KT] == 0.0)
+
+
+def test_run_metrics_follow_the_contract_and_do_not_depend_on_workers(tmp_path):
+    scn = _load(tmp_path)
+    a = run_scenario(scn, seed=3)
+    b = run_scenario(scn, seed=3, n_jobs=2)
+    assert np.array_equal(a.outcomes["rolling-ekf"]["err"], b.outcomes["rolling-ekf"]["err"])
+    m = a.metrics
+    r = m["methods"]["rolling-ekf"]
+    assert set(m) >= {"scenario", "runs", "seed", "duration_s", "quick", "limits_arcmin", "methods"}
+    assert set(r["final_error_arcmin"]["U"]) == {"mean", "std", "rms", "max_abs"} and "wall_s" in r
+    assert set(r["coefficients"]) == set(pf.COEFF_NAMES)
+    assert r["coefficients"]["D0_X"]["unit"] == "deg/h"
+    assert 0 < r["information_rank"] <= 45 and m["information_rank"] == r["information_rank"]
+    folder = tmp_path / "rep"
+    write_scenario_report(a, folder)
+    text = (folder / "report.md").read_text()
+    assert "coefficients.png" in text and (folder / "attitude.png").stat().st_size > 10000
+    assert compare(json.loads((folder / "metrics.json").read_text()), m) == []
+
+
+@pytest.mark.parametrize("edit,field", [
+    ('axis = "south"', "platform.scheme[0].axis"),
+    ("D0 = 1.0, K0", "platform.coeff_mean.D9"),
+    ("duration_s = 120.0", "duration_s"),
+])
+def test_bad_platform_fields_are_named(tmp_path, edit, field):
+    bad = {"platform.scheme[0].axis": 'axis = "sideways"', "platform.coeff_mean.D9": "D9 = 1.0, K0",
+           "duration_s": "duration_s = 100.0"}[field]
+    with pytest.raises(scenarios.ScenarioError) as exc:
+        _load(tmp_path, TOML.replace(edit, bad, 1))
+    assert field in str(exc.value) and "\n" not in str(exc.value)
