@@ -46,6 +46,8 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.spatial.transform import Rotation
 
+from pathlib import Path
+
 from fusionbench import earth
 from fusionbench import platform as pf
 
@@ -195,12 +197,11 @@ def error_H(x, lat, h=0.0):
     return H
 
 
-def information_rank(M, threshold=1.0):
-    """Numerical rank of a prior-scaled information matrix: the number of its eigenvalues above
-    ``threshold`` (1: directions in which the data carry more information than the prior, i.e. the
-    posterior variance is below half the prior's, ``P = (I + M)^-1`` in these coordinates). The raw
-    spectrum spans 20 decades without a gap (1-ug outputs against degree-level priors), so a relative
-    SVD tolerance would be arbitrary; this threshold is not."""
+def informed_directions(M, threshold=1.0):
+    """Directions of a prior-scaled information matrix in which the data outweigh the prior: eigenvalues
+    above ``threshold`` (1: the posterior variance ``(I + M)^-1`` is below half the prior's). Unlike the
+    rank (:func:`baselines.rolling_observability.information_rank`, a structural property) this depends
+    on the noise and the priors: how many directions a run actually calibrates."""
     ev = np.linalg.eigvalsh(0.5 * (np.asarray(M) + np.asarray(M).T))
     return int(np.sum(ev > threshold))
 
@@ -244,7 +245,9 @@ class CalibrationResult:
     sigma : ndarray, shape (M, 45)
         Its standard deviations (square roots of the diagonal of P).
     figures : dict
-        ``information_rank``: rank of the information matrix the run gathered (below).
+        ``information_rank``: rank of the information matrix the run gathered (below; SVD, relative
+        tolerance :data:`baselines.rolling_observability.RTOL`), ``informed_directions``
+        (:func:`informed_directions`).
     information : ndarray, shape (45, 45)
         Information matrix of the run in prior-scaled error coordinates (e = D z):
         ``sum_k Phi(t_k, 0)^T H_k^T R^-1 H_k Phi(t_k, 0)`` with the filter's own F and H along its
@@ -369,7 +372,18 @@ class RollingEKF:
             x = _apply(x, kf.x[:, 0] * D)
             xs[k] = x
             sig[k] = _sigmas(x, kf.P, D)
-        return CalibrationResult(t, xs, sig, {"information_rank": information_rank(info)}, info)
+        from .rolling_observability import information_rank  # it builds on this module's Jacobians
+
+        figures = {"information_rank": information_rank(info), "informed_directions": informed_directions(info)}
+        return CalibrationResult(t, xs, sig, figures, info)
+
+    def report_figures(self, folder, scheme, lat, h=0.0):
+        """The output-sensitivity curves of ``scheme`` (seed 002 Figs. 4-7) into ``folder``; [(file, caption)]."""
+        from .rolling_observability import sensitivity_curves, sensitivity_figure
+
+        times, S = sensitivity_curves(scheme, lat, h)
+        sensitivity_figure(times, S, path=Path(folder) / "sensitivity.png")
+        return [("sensitivity.png", "output sensitivity of the coefficients along the scheme (seed 002 Figs. 4-7)")]
 
 
 def _apply(x, e):
