@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.spatial.transform import Rotation
+from threadpoolctl import threadpool_limits
 
 from pathlib import Path
 
@@ -329,6 +330,10 @@ class RollingEKF:
             raise ValueError(f"y, w_cmd: expected shape ({t.size}, 3), found {y.shape} and {w_cmd.shape}")
         if not (np.all(np.isfinite(y)) and np.all(np.isfinite(w_cmd))):
             raise ValueError("y, w_cmd: expected finite values, found NaN or inf")
+        with threadpool_limits(1):  # 45 x 45 products gain nothing from BLAS threads, and one thread keeps
+            return self._run(t, y, w_cmd, lat, h, x0)  # the sums in a fixed order: identical numbers
+
+    def _run(self, t, y, w_cmd, lat, h, x0):
         dt = float(t[1] - t[0])
         if x0 is None:
             x0 = np.zeros(pf.N_STATES)
