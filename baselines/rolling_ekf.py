@@ -115,12 +115,9 @@ def _rate_inverse(angles):
     return np.array([[cs / ct, -ss / ct, 0.0], [ss, cs, 0.0], [-st * cs / ct, st * ss / ct, 1.0]])
 
 
-def jacobian_h(x, lat, h=0.0):
-    """dh/dx (3 x 45) at the 45-vector ``x`` (module notes)."""
-    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
-    g = float(earth.gravity(lat, h))
-    M, dM = _dM(ang)
-    f = g * M[1]  # f^p = g M^T e_U (e_U = NUE y)
+def _accel_partials(c, f):
+    """Output partials on the accelerometer coefficients at specific force ``f`` (p), with A and
+    ``s = dy/da = 1 + K1 + 2 K2 a``: (H (3 x 45, angle columns zero), A, s)."""
     A = pf.accel_matrix(c)
     a = A @ f
     s = 1.0 + c[pf.K1] + 2.0 * c[pf.K2] * a
@@ -130,6 +127,16 @@ def jacobian_h(x, lat, h=0.0):
     H[:, pf.K2] = np.diag(a * a)
     H[1, 36] = s[1] * f[0]
     H[2, 37], H[2, 38] = s[2] * f[0], s[2] * f[1]
+    return H, A, s
+
+
+def jacobian_h(x, lat, h=0.0):
+    """dh/dx (3 x 45) at the 45-vector ``x`` (module notes)."""
+    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    g = float(earth.gravity(lat, h))
+    M, dM = _dM(ang)
+    f = g * M[1]  # f^p = g M^T e_U (e_U = NUE y)
+    H, A, s = _accel_partials(c, f)
     df = np.stack([g * d[1] for d in dM], axis=1)  # columns d f^p / d alpha
     H[:, pf.ANGLES] = (s[:, None] * A) @ df
     return H
@@ -185,15 +192,7 @@ def error_H(x, lat, h=0.0):
     g = float(earth.gravity(lat, h))
     C = pf.angles_to_dcm(ang)
     f = C.T @ np.array([0.0, 0.0, g])
-    A = pf.accel_matrix(c)
-    a = A @ f
-    s = 1.0 + c[pf.K1] + 2.0 * c[pf.K2] * a
-    H = np.zeros((3, pf.N_STATES))
-    H[:, pf.K0] = np.eye(3)
-    H[:, pf.K1] = np.diag(a)
-    H[:, pf.K2] = np.diag(a * a)
-    H[1, 36] = s[1] * f[0]
-    H[2, 37], H[2, 38] = s[2] * f[0], s[2] * f[1]
+    H, A, s = _accel_partials(c, f)
     H[:, pf.ANGLES] = -(s[:, None] * A) @ C.T @ _skew([0.0, 0.0, g])
     return H
 

@@ -132,26 +132,37 @@ def available_methods():
     return {ep.name: ep for ep in entry_points(group=GROUP)}
 
 
+def load_entry(group: str, spec: str, what: str = "method", **options):
+    """Instantiate a class registered by name in the entry-point ``group``, or given as ``module:Class``.
+
+    Raises
+    ------
+    ValueError
+        One line naming ``what`` and the spec, and what is available.
+    """
+    found = {ep.name: ep for ep in entry_points(group=group)}
+    if spec in found:
+        cls = found[spec].load()
+    elif ":" in spec:
+        mod, _, attr = spec.partition(":")
+        try:
+            cls = getattr(importlib.import_module(mod), attr)
+        except (ImportError, AttributeError) as exc:
+            raise ValueError(f"{what} {spec!r}: cannot import ({exc})") from None
+    else:
+        raise ValueError(f"{what} {spec!r}: expected one of {sorted(found)} or a module:Class path")
+    return cls(**options)
+
+
 def load_method(spec: str, **options):
-    """Instantiate a method by registered name or ``module:Class`` path.
+    """Instantiate an alignment method by registered name or ``module:Class`` path.
 
     Raises
     ------
     ValueError
         One line naming the method and what is available.
     """
-    methods = available_methods()
-    if spec in methods:
-        cls = methods[spec].load()
-    elif ":" in spec:
-        mod, _, attr = spec.partition(":")
-        try:
-            cls = getattr(importlib.import_module(mod), attr)
-        except (ImportError, AttributeError) as exc:
-            raise ValueError(f"method {spec!r}: cannot import ({exc})") from None
-    else:
-        raise ValueError(f"method {spec!r}: expected one of {sorted(methods)} or a module:Class path")
-    obj = cls(**options)
+    obj = load_entry(GROUP, spec, "method", **options)
     if not isinstance(obj, Aligner):
         raise ValueError(f"method {spec!r}: expected an object with name, description, min_duration_s and align()")
     return obj

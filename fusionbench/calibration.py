@@ -21,7 +21,6 @@ unit named beside them, and ``groups`` the largest |mean error| of each group.
 
 from __future__ import annotations
 
-import importlib
 import time
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -30,6 +29,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from . import metrics, units
+from .aligner import load_entry
 from . import platform as pf
 
 GROUP = "fusionbench.calibrators"
@@ -165,18 +165,7 @@ def available_calibrators():
 
 def load_calibrator(spec, **options):
     """A calibration method by registered name or ``module:Class`` path (ValueError naming it otherwise)."""
-    found = available_calibrators()
-    if spec in found:
-        cls = found[spec].load()
-    elif ":" in spec:
-        mod, _, attr = spec.partition(":")
-        try:
-            cls = getattr(importlib.import_module(mod), attr)
-        except (ImportError, AttributeError) as exc:
-            raise ValueError(f"calibration method {spec!r}: cannot import ({exc})") from None
-    else:
-        raise ValueError(f"calibration method {spec!r}: expected one of {sorted(found)} or a module:Class path")
-    obj = cls(**options)
+    obj = load_entry(GROUP, spec, "calibration method", **options)
     if not callable(getattr(obj, "calibrate", None)):
         raise ValueError(f"calibration method {spec!r}: expected an object with calibrate()")
     return obj

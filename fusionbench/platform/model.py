@@ -1,0 +1,449 @@
+"""Platform error model: coefficients and their units, attitude angles, drift, platform rate, accelerometer
+outputs, and the filter's f(x) and h(x) (equations in :mod:`fusionbench.platform`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import earth, units
+
+# --------------------------------------------------------------------------------------------------
+# constants, names and units
+
+#: ``v_NUE = P_NUE @ v_ENU``.
+P_NUE = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+
+N_COEFFS = 42
+N_STATES = 45
+
+#: Index ranges of the coefficient groups in the 42- (and 45-) vector.
+D0 = slice(0, 3)
+D1 = slice(3, 12)
+D2 = slice(12, 21)
+GYRO_MOUNT = slice(21, 27)
+K0 = slice(27, 30)
+K1 = slice(30, 33)
+K2 = slice(33, 36)
+ACCEL_MOUNT = slice(36, 39)
+KT = slice(39, 42)
+ANGLES = slice(42, 45)
+
+_AX = ("X", "Y", "Z")
+#: Names of the 42 coefficients, in vector order.
+COEFF_NAMES = (
+    [f"D0_{a}" for a in _AX]
+    + [f"{t}_{a}" for a in _AX for t in ("DI", "DO", "DS")]
+    + [f"{t}_{a}" for a in _AX for t in ("DIO", "DIS", "DOS")]
+    + ["G_XY", "G_XZ", "G_YX", "G_YZ", "G_ZX", "G_ZY"]
+    + [f"K0_{a}" for a in _AX]
+    + [f"K1_{a}" for a in _AX]
+    + [f"K2_{a}" for a in _AX]
+    + ["A_YX", "A_ZX", "A_ZY"]
+    + [f"KT_{a}" for a in _AX]
+)
+#: Names of the 45 EKF states: the coefficients, then the attitude angles.
+STATE_NAMES = COEFF_NAMES + ["phi", "theta", "psi"]
+
+_GROUPS = (  # (count, SI unit, reporting unit, SI value of one reporting unit)
+    (3, "rad/s", "deg/h", units.DEG_PER_H),
+    (9, "rad/s/(m/s^2)", "deg/h/g", units.DEG_PER_H / units.G0),
+    (9, "rad/s/(m/s^2)^2", "deg/h/g^2", units.DEG_PER_H / units.G0**2),
+    (6, "rad", "arcsec", units.ARCSEC),
+    (3, "m/s^2", "ug", units.UG),
+    (3, "1", "ppm", units.PPM),
+    (3, "1/(m/s^2)", "ug/g^2", units.UG / units.G0**2),
+    (3, "rad", "arcsec", units.ARCSEC),
+    (3, "1", "ppm", units.PPM),
+)
+#: SI unit of each coefficient.
+COEFF_UNITS = [u for n, u, _, _ in _GROUPS for _ in range(n)]
+#: Customary (reporting) unit of each coefficient.
+COEFF_CUSTOMARY_UNITS = [u for n, _, u, _ in _GROUPS for _ in range(n)]
+#: SI value of one customary unit, per coefficient: ``si = customary * COEFF_SCALE``.
+COEFF_SCALE = np.array([s for n, _, _, s in _GROUPS for _ in range(n)])
+
+#: The paper's gyro white drift, 0.05 deg/h (rad/s, standard deviation per 2-ms sample).
+PAPER_GYRO_NOISE = 0.05 * units.DEG_PER_H
+#: The paper's accelerometer noise, 1 ug (m/s^2, standard deviation per output).
+PAPER_ACCEL_NOISE = 1.0 * units.UG
+
+
+def coeff_vector(customary: bool = False, **named) -> np.ndarray:
+    """A 42-vector of coefficients from keyword values, the others zero.
+
+    Parameters
+    ----------
+    customary : bool, optional
+        If True the values are in :data:`COEFF_CUSTOMARY_UNITS` (deg/h, arcsec, ug, ppm, ...),
+        otherwise SI (:data:`COEFF_UNITS`).
+    **named : float
+        Values by name from :data:`COEFF_NAMES`, e.g. ``coeff_vector(True, D0_X=0.1, KT_Z=50)``.
+
+    Returns
+    -------
+    ndarray, shape (42,)
+        Coefficients in SI units.
+    """
+    c = np.zeros(N_COEFFS)
+    for name, value in named.items():
+        if name not in COEFF_NAMES:
+            raise ValueError(f"{name}: expected a coefficient name from COEFF_NAMES, found {name!r}")
+        c[COEFF_NAMES.index(name)] = float(value)
+    if not np.all(np.isfinite(c)):
+        raise ValueError("coeffs: expected finite values, found NaN or inf")
+    return c * COEFF_SCALE if customary else c
+
+
+def to_customary(coeffs):
+    """Coefficients (..., 42) in SI to the reporting units of :data:`COEFF_CUSTOMARY_UNITS`."""
+    return _check_coeffs(coeffs) / COEFF_SCALE
+
+
+def from_customary(values):
+    """Coefficients (..., 42) in the reporting units to SI."""
+    return _check_coeffs(values) * COEFF_SCALE
+
+
+# --------------------------------------------------------------------------------------------------
+# validation helpers
+
+
+def _check_coeffs(c, name="coeffs", size=N_COEFFS):
+    c = np.asarray(c, dtype=float)
+    if c.ndim < 1 or c.shape[-1] != size:
+        raise ValueError(f"{name}: expected shape (..., {size}), found {c.shape}")
+    if not np.all(np.isfinite(c)):
+        raise ValueError(f"{name}: expected finite values, found NaN or inf")
+    return c
+
+
+def _check_vec(v, name):
+    v = np.asarray(v, dtype=float)
+    if v.ndim < 1 or v.shape[-1] != 3:
+        raise ValueError(f"{name}: expected shape (..., 3), found {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name}: expected finite values, found NaN or inf")
+    return v
+
+
+def _check_dcm(C, name="C_pn"):
+    C = np.asarray(C, dtype=float)
+    if C.ndim < 2 or C.shape[-2:] != (3, 3):
+        raise ValueError(f"{name}: expected shape (..., 3, 3), found {C.shape}")
+    if not np.all(np.isfinite(C)):
+        raise ValueError(f"{name}: expected finite values, found NaN or inf")
+    err = np.abs(np.swapaxes(C, -1, -2) @ C - np.eye(3)).max(initial=0.0)
+    if err > 1e-6 or np.any(np.linalg.det(C) < 0):
+        raise ValueError(f"{name}: expected a rotation matrix (C^T C = I, det +1), found |C^T C - I| = {err:.3g}")
+    return C
+
+
+def _check_site(lat, h):
+    earth.check_latitude(lat, "lat")
+    h = float(h)
+    if not np.isfinite(h) or abs(h) > 1e5:
+        raise ValueError(f"h: expected a finite height within 100 km of the ellipsoid, found {h} m")
+    return float(lat), h
+
+
+# --------------------------------------------------------------------------------------------------
+# attitude angles
+
+
+def angles_to_dcm(angles):
+    """``C_pn`` from the attitude angles ``[phi, theta, psi]`` (rad), ``(..., 3)`` -> ``(..., 3, 3)``.
+
+    ``P_NUE @ C_pn = Rx(phi) Ry(theta) Rz(psi)`` (see the module notes).
+    """
+    return _angles_dcm(_check_vec(angles, "angles"))
+
+
+def _angles_dcm(a):
+    """:func:`angles_to_dcm` without input checks (for the filter's inner loop)."""
+    sf, cf = np.sin(a[..., 0]), np.cos(a[..., 0])
+    st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
+    ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
+    M = np.empty(a.shape[:-1] + (3, 3))  # Rx(phi) Ry(theta) Rz(psi)
+    M[..., 0, 0] = ct * cs
+    M[..., 0, 1] = -ct * ss
+    M[..., 0, 2] = st
+    M[..., 1, 0] = cf * ss + sf * st * cs
+    M[..., 1, 1] = cf * cs - sf * st * ss
+    M[..., 1, 2] = -sf * ct
+    M[..., 2, 0] = sf * ss - cf * st * cs
+    M[..., 2, 1] = sf * cs + cf * st * ss
+    M[..., 2, 2] = cf * ct
+    return P_NUE.T @ M
+
+
+def dcm_to_angles(C_pn):
+    """Attitude angles ``[phi, theta, psi]`` (rad) of ``C_pn``, ``(..., 3, 3)`` -> ``(..., 3)``.
+
+    ``theta`` lies in [-pi/2, pi/2], ``phi`` and ``psi`` in (-pi, pi].
+    """
+    C = np.asarray(C_pn, dtype=float)
+    if C.ndim < 2 or C.shape[-2:] != (3, 3):
+        raise ValueError(f"C_pn: expected shape (..., 3, 3), found {C.shape}")
+    M = P_NUE @ C
+    theta = np.arctan2(M[..., 0, 2], np.hypot(M[..., 0, 0], M[..., 0, 1]))
+    psi = np.arctan2(-M[..., 0, 1], M[..., 0, 0])
+    phi = np.arctan2(-M[..., 1, 2], M[..., 2, 2])
+    return np.stack([phi, theta, psi], axis=-1)
+
+
+def euler_rate_matrix(angles):
+    """``B`` with ``w_np^p = B @ [phi', theta', psi']`` (see the module notes), ``(..., 3, 3)``."""
+    a = _check_vec(angles, "angles")
+    st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
+    ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
+    B = np.zeros(a.shape[:-1] + (3, 3))
+    B[..., 0, 0], B[..., 0, 1] = cs * ct, ss
+    B[..., 1, 0], B[..., 1, 1] = -ss * ct, cs
+    B[..., 2, 0], B[..., 2, 2] = st, 1.0
+    return B
+
+
+def angle_rates(angles, w_np_p):
+    """Rates ``[phi', theta', psi']`` (rad/s) of the attitude angles for the relative rate ``w_np^p``.
+
+    Parameters
+    ----------
+    angles : array_like, shape (..., 3)
+        ``[phi, theta, psi]``, rad (``|theta|`` < 90 deg).
+    w_np_p : array_like, shape (..., 3)
+        Angular rate of p relative to n, resolved in p, rad/s.
+    """
+    return _angle_rates(_check_vec(angles, "angles"), _check_vec(w_np_p, "w_np_p"))
+
+
+def _angle_rates(a, w):
+    """:func:`angle_rates` without input checks."""
+    st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
+    ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
+    dphi = (cs * w[..., 0] - ss * w[..., 1]) / ct
+    dtheta = ss * w[..., 0] + cs * w[..., 1]
+    dpsi = w[..., 2] - st * dphi
+    return np.stack([dphi, dtheta, dpsi], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------------
+# the error model (plain arithmetic shared with the compiled simulator)
+
+
+def _drift_terms(c, f0, f1, f2):
+    """Gyro drifts (eps_X, eps_Y, eps_Z) from coefficients ``c`` (indexable 0..41) and f^p components.
+
+    Plain arithmetic: ``c[i]`` may be a float (compiled loop) or an array (NumPy, leading axes).
+    """
+    # X gyro (I, O, S) = (x, y, z); Y gyro = (y, z, x); Z gyro = (z, x, y)
+    ex = c[0] + c[3] * f0 + c[4] * f1 + c[5] * f2 + c[12] * f0 * f1 + c[13] * f0 * f2 + c[14] * f1 * f2
+    ey = c[1] + c[6] * f1 + c[7] * f2 + c[8] * f0 + c[15] * f1 * f2 + c[16] * f1 * f0 + c[17] * f2 * f0
+    ez = c[2] + c[9] * f2 + c[10] * f0 + c[11] * f1 + c[18] * f2 * f0 + c[19] * f2 * f1 + c[20] * f0 * f1
+    return ex, ey, ez
+
+
+def _accel_terms(c, f0, f1, f2):
+    """Accelerometer outputs (y_X, y_Y, y_Z) from coefficients ``c`` and f^p components; plain arithmetic."""
+    a0 = f0
+    a1 = c[36] * f0 + f1
+    a2 = c[37] * f0 + c[38] * f1 + f2
+    y0 = c[27] + (1.0 + c[30]) * a0 + c[33] * a0 * a0
+    y1 = c[28] + (1.0 + c[31]) * a1 + c[34] * a1 * a1
+    y2 = c[29] + (1.0 + c[32]) * a2 + c[35] * a2 * a2
+    return y0, y1, y2
+
+
+def specific_force_p(C_pn, lat, h=0.0):
+    """Specific force of the static base in p, ``C_pn^T [0, 0, g]`` (m/s^2), shape ``(..., 3)``."""
+    C = _check_dcm(C_pn)
+    lat, h = _check_site(lat, h)
+    return float(earth.gravity(lat, h)) * C[..., 2, :]
+
+
+def gyro_matrix(coeffs):
+    """Gyro input-axis matrix ``G`` (rows: input axes in p), ``(..., 42)`` -> ``(..., 3, 3)``."""
+    c = _check_coeffs(coeffs)
+    G = np.broadcast_to(np.eye(3), c.shape[:-1] + (3, 3)).copy()
+    G[..., 0, 1], G[..., 0, 2] = c[..., 21], c[..., 22]
+    G[..., 1, 0], G[..., 1, 2] = c[..., 23], c[..., 24]
+    G[..., 2, 0], G[..., 2, 1] = c[..., 25], c[..., 26]
+    return G
+
+
+def accel_matrix(coeffs):
+    """Accelerometer sensitive-axis matrix ``A``, ``(..., 42)`` -> ``(..., 3, 3)``."""
+    c = _check_coeffs(coeffs)
+    A = np.broadcast_to(np.eye(3), c.shape[:-1] + (3, 3)).copy()
+    A[..., 1, 0] = c[..., 36]
+    A[..., 2, 0], A[..., 2, 1] = c[..., 37], c[..., 38]
+    return A
+
+
+def gyro_drift(coeffs, f_p):
+    """Gyro drifts ``eps`` (rad/s, one per gyro X, Y, Z) at specific force ``f_p`` (m/s^2, p frame).
+
+    Parameters
+    ----------
+    coeffs : array_like, shape (..., 42)
+        Coefficients, SI.
+    f_p : array_like, shape (..., 3)
+        Specific force in p, m/s^2.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Drift of each gyro about its input axis, rad/s (no noise).
+    """
+    c = np.moveaxis(_check_coeffs(coeffs), -1, 0)
+    f = _check_vec(f_p, "f_p")
+    out = _drift_terms(c, f[..., 0], f[..., 1], f[..., 2])
+    return np.stack(np.broadcast_arrays(*out), axis=-1)
+
+
+def platform_rate(coeffs, w_cmd_p, f_p, exact=True):
+    """Absolute angular rate of the platform ``w_ip^p`` (rad/s) under a torque command.
+
+    Parameters
+    ----------
+    coeffs : array_like, shape (..., 42)
+        Coefficients, SI.
+    w_cmd_p : array_like, shape (..., 3)
+        Torque-commanded rate, rad/s, one per gyro (X, Y, Z).
+    f_p : array_like, shape (..., 3)
+        Specific force in p, m/s^2 (for the g-sensitive drift).
+    exact : bool, optional
+        ``G^-1 ((I + diag KT) w_cmd + eps)`` (default), or the first-order form
+        ``w_cmd + KT w_cmd - (G - I) w_cmd + eps`` (the paper's eq. 19, used by the filter).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``w_ip^p``, rad/s.
+    """
+    c = _check_coeffs(coeffs)
+    w = _check_vec(w_cmd_p, "w_cmd_p")
+    eps = gyro_drift(c, f_p)
+    rhs = (1.0 + c[..., KT]) * w + eps
+    G = gyro_matrix(c)
+    if exact:
+        shape = np.broadcast_shapes(G.shape[:-2], rhs.shape[:-1])
+        G = np.broadcast_to(G, shape + (3, 3))
+        return np.linalg.solve(G, np.broadcast_to(rhs, shape + (3,))[..., None])[..., 0]
+    return rhs - ((G - np.eye(3)) @ w[..., None])[..., 0]
+
+
+def attitude_rate(coeffs, C_pn, w_cmd_p, lat, h=0.0, exact=True):
+    """``dC_pn/dt = C_pn [w_np^p x]`` (1/s), with ``w_np^p = w_ip^p - C_pn^T w_ie^n``.
+
+    Parameters
+    ----------
+    coeffs : array_like, shape (..., 42)
+    C_pn : array_like, shape (..., 3, 3)
+        Attitude, p to ENU.
+    w_cmd_p : array_like, shape (..., 3)
+        Torque command, rad/s.
+    lat, h : float
+        Latitude (rad) and height (m) of the static base.
+    exact : bool, optional
+        Exact or first-order platform rate (see :func:`platform_rate`).
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    w_np = _relative_rate(coeffs, C_pn, w_cmd_p, lat, h, exact)
+    z = np.zeros(w_np.shape[:-1])
+    x, y, w = w_np[..., 0], w_np[..., 1], w_np[..., 2]
+    K = np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+    return np.asarray(C_pn, dtype=float) @ K
+
+
+def _relative_rate(coeffs, C_pn, w_cmd_p, lat, h, exact):
+    C = _check_dcm(C_pn)
+    f_p = specific_force_p(C, lat, h)
+    w_ip = platform_rate(coeffs, w_cmd_p, f_p, exact=exact)
+    w_ie = earth.earth_rate_n(lat)
+    return w_ip - np.einsum("...ji,j->...i", C, w_ie)
+
+
+def accel_output(coeffs, f_p):
+    """Accelerometer outputs ``y`` (m/s^2, X, Y, Z) at specific force ``f_p`` (m/s^2, p), no noise.
+
+    ``y_j = K0_j + (1 + K1_j) f_j + K2_j f_j^2`` with ``f = A @ f_p``.
+    """
+    c = np.moveaxis(_check_coeffs(coeffs), -1, 0)
+    f = _check_vec(f_p, "f_p")
+    out = _accel_terms(c, f[..., 0], f[..., 1], f[..., 2])
+    return np.stack(np.broadcast_arrays(*out), axis=-1)
+
+
+def measurement(state, lat, h=0.0):
+    """The EKF's ``h(x)``: accelerometer outputs (m/s^2) predicted from the 45-vector.
+
+    Parameters
+    ----------
+    state : array_like, shape (..., 45)
+        ``[42 coefficients (SI), phi, theta, psi (rad)]``.
+    lat, h : float
+        Latitude (rad) and height (m).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``y`` of the X, Y, Z accelerometers, m/s^2.
+    """
+    x = _check_coeffs(state, "state", N_STATES)
+    lat, h = _check_site(lat, h)
+    return measurement_unchecked(x, float(earth.gravity(lat, h)))
+
+
+def measurement_unchecked(x, g):
+    """:func:`measurement` for a checked state and gravity ``g`` (m/s^2): no input checks (inner loops)."""
+    f = g * _angles_dcm(x[..., ANGLES])[..., 2, :]
+    c = np.moveaxis(x, -1, 0)
+    return np.stack(np.broadcast_arrays(*_accel_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
+
+
+def state_derivative(state, w_cmd_p, lat, h=0.0):
+    """The EKF's ``f(x)``: time derivative of the 45-vector under the torque command ``w_cmd_p``.
+
+    The coefficients are constant; the angle rates follow from the kinematics with the first-order
+    platform rate (eq. 19) through the Euler-angle rate relation (see the module notes).
+
+    Parameters
+    ----------
+    state : array_like, shape (..., 45)
+        ``[42 coefficients (SI), phi, theta, psi (rad)]``.
+    w_cmd_p : array_like, shape (..., 3)
+        Torque command held over the step, rad/s.
+    lat, h : float
+        Latitude (rad) and height (m).
+
+    Returns
+    -------
+    ndarray, shape (..., 45)
+        Zeros for the coefficients, then ``[phi', theta', psi']`` in rad/s.
+    """
+    x = _check_coeffs(state, "state", N_STATES)
+    w = _check_vec(w_cmd_p, "w_cmd_p")
+    lat, h = _check_site(lat, h)
+    return state_derivative_unchecked(x, w, float(earth.gravity(lat, h)), earth.earth_rate_n(lat))
+
+
+def state_derivative_unchecked(x, w, g, w_ie_n):
+    """:func:`state_derivative` for checked inputs, gravity ``g`` and earth rate ``w_ie_n`` (ENU): no
+    input checks (the filter's Runge-Kutta steps)."""
+    ang = x[..., ANGLES]
+    C = _angles_dcm(ang)
+    f = g * C[..., 2, :]
+    c = np.moveaxis(x, -1, 0)
+    eps = np.stack(np.broadcast_arrays(*_drift_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
+    Mg_w = np.stack([c[21] * w[..., 1] + c[22] * w[..., 2], c[23] * w[..., 0] + c[24] * w[..., 2],
+                     c[25] * w[..., 0] + c[26] * w[..., 1]], axis=-1)
+    w_np = (1.0 + x[..., KT]) * w - Mg_w + eps - np.einsum("...ji,j->...i", C, w_ie_n)
+    rates = _angle_rates(ang, w_np)
+    out = np.zeros(np.broadcast_shapes(x.shape[:-1], rates.shape[:-1]) + (N_STATES,))
+    out[..., ANGLES] = rates
+    return out
+
+
