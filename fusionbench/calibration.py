@@ -222,13 +222,12 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1)
     if runs < 1:
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
     spec = scn.platform.scaled(duration)
-    if n_jobs == 1:
+    if n_jobs == 1 or runs == 1:
         results = [_one_run(scn, spec, methods, k, seed) for k in range(runs)]
     else:
         results = Parallel(n_jobs=n_jobs)(delayed(_one_run)(scn, spec, methods, k, seed) for k in range(runs))
-    t = spec.scheme.output_times() if hasattr(spec.scheme, "output_times") else None
     total = sum(s.duration for s in spec.scheme.segments)
-    t = np.arange(1, int(round(total / spec.scheme.filter_s)) + 1) * spec.scheme.filter_s if t is None else t
+    t = np.arange(1, int(round(total / spec.scheme.filter_s)) + 1) * spec.scheme.filter_s  # the filter times
     outcomes = {}
     for name in methods:
         rs = [r[name] for r in results]

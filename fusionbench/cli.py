@@ -36,9 +36,9 @@ def _parser():
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--quick", action="store_true", help="reduced size for CI")
     r.add_argument("--out", default="report", help="output folder (default ./report)")
-    r.add_argument("--jobs", type=int, default=1,
-                   help="parallel workers over batches of runs (joblib); -1 for all cores; the numbers do not "
-                        "depend on it (worth it for long scenarios: each worker pays a few seconds to start)")
+    r.add_argument("--jobs", type=int, default=-1,
+                   help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
+                        "process; the numbers do not depend on it")
     c = sub.add_parser("check", help="compare DIR/metrics.json with the committed reference metrics")
     c.add_argument("dir")
     c.add_argument("--reference", default="benchmarks/reference", help="reference folder or file")

@@ -262,8 +262,7 @@ def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y"
 def _calibration_report(out, folder):
     m = out.metrics
     scn = out.scenario
-    attitude = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
-    fig, axes = attitude
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
     for name, oc in out.outcomes.items():
         rms = np.sqrt(np.mean(oc["phi"] ** 2, axis=0)) / units.ARCSEC
         for i, ax in enumerate(axes):

@@ -131,7 +131,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     quick : bool
         Use the scenario's reduced duration and run count.
     n_jobs : int
-        Parallel workers over batches (joblib); 1 runs in this process.
+        Parallel workers over batches (joblib; -1: all cores); 1, or a single batch, runs in this process.
     progress : bool, optional
         Show a tqdm bar over runs (default: only when stderr is a terminal).
     batch_size : int, optional
@@ -165,7 +165,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     jobs = [(k0, min(batch_size, runs - k0)) for k0 in starts]
     show = sys.stderr.isatty() if progress is None else progress
     bar = tqdm(total=runs, desc=scn.name, unit="run", disable=not show)
-    if n_jobs == 1:
+    if n_jobs == 1 or len(jobs) == 1:  # one batch: no worker to start
         results = []
         for k0, n in jobs:
             results.append(_run_batch(scn, methods, k0, n, seed, duration))
