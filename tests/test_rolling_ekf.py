@@ -93,3 +93,23 @@ def test_bad_input_is_named():
         ekf.calibrate(np.arange(1, 11) * 0.2, np.zeros((9, 3)), np.zeros((10, 3)), LAT)
     with pytest.raises(ValueError, match="expected finite"):
         ekf.calibrate(np.arange(1, 11) * 0.2, np.full((10, 3), np.nan), np.zeros((10, 3)), LAT)
+
+
+def test_noise_free_paper_run_recovers_every_coefficient_within_its_sigma():
+    """The paper's scheme and Table 1 truths (scenario paper002-rolling, run 0), noise off: every coefficient
+    ends within 4 of the filter's own sigmas (2.4 measured, the torquer X worst; with the second-order term
+    weighted 1 instead of 3 it was 27: overconfident), and the accelerometer bias and scale factor within
+    the paper's 1 ug and 1 ppm (0.08 ug and 0.16 ppm measured). The weakest terms (torquer, gyro axis
+    angles) stay up to 30 % off: the 1 % of the issue is not reached (see the issue note)."""
+    from fusionbench import scenarios
+    from fusionbench.calibration import draw_truth
+
+    scn = scenarios.get("paper002-rolling")
+    c, a = draw_truth(scn.platform, 0, 0)
+    run = pf.simulate(scn.platform.scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    res = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
+    est = res.final()
+    z = (est[:pf.N_COEFFS] - c) / res.sigma[-1, :pf.N_COEFFS]
+    assert np.max(np.abs(z)) < 4.0
+    err = pf.to_customary(est[:pf.N_COEFFS] - c)
+    assert np.max(np.abs(err[pf.K0])) < 1.0 and np.max(np.abs(err[pf.K1])) < 1.0
