@@ -160,20 +160,17 @@ def angles_to_dcm(angles):
 
 def _angles_dcm(a):
     """:func:`angles_to_dcm` without input checks (for the filter's inner loop)."""
-    sf, cf = np.sin(a[..., 0]), np.cos(a[..., 0])
-    st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
-    ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
-    M = np.empty(a.shape[:-1] + (3, 3))  # Rx(phi) Ry(theta) Rz(psi)
-    M[..., 0, 0] = ct * cs
-    M[..., 0, 1] = -ct * ss
-    M[..., 0, 2] = st
-    M[..., 1, 0] = cf * ss + sf * st * cs
-    M[..., 1, 1] = cf * cs - sf * st * ss
-    M[..., 1, 2] = -sf * ct
-    M[..., 2, 0] = sf * ss - cf * st * cs
-    M[..., 2, 1] = sf * cs + cf * st * ss
-    M[..., 2, 2] = cf * ct
+    M = np.stack(_dcm_terms(np.sin(a[..., 0]), np.cos(a[..., 0]), np.sin(a[..., 1]), np.cos(a[..., 1]),
+                            np.sin(a[..., 2]), np.cos(a[..., 2])), axis=-1).reshape(a.shape[:-1] + (3, 3))
     return P_NUE.T @ M
+
+
+def _dcm_terms(sf, cf, st, ct, ss, cs):
+    """The nine entries (row-major) of ``M = Rx(phi) Ry(theta) Rz(psi)`` from the angles' sines and cosines;
+    ``C_pn = P_NUE^T M`` (rows E, N, U = M's rows 2, 0, 1). Plain arithmetic (NumPy or compiled)."""
+    return (ct * cs, -ct * ss, st,
+            cf * ss + sf * st * cs, cf * cs - sf * st * ss, -sf * ct,
+            sf * ss - cf * st * cs, sf * cs + cf * st * ss, cf * ct)
 
 
 def dcm_to_angles(C_pn):
@@ -218,12 +215,14 @@ def angle_rates(angles, w_np_p):
 
 def _angle_rates(a, w):
     """:func:`angle_rates` without input checks."""
-    st, ct = np.sin(a[..., 1]), np.cos(a[..., 1])
-    ss, cs = np.sin(a[..., 2]), np.cos(a[..., 2])
-    dphi = (cs * w[..., 0] - ss * w[..., 1]) / ct
-    dtheta = ss * w[..., 0] + cs * w[..., 1]
-    dpsi = w[..., 2] - st * dphi
-    return np.stack([dphi, dtheta, dpsi], axis=-1)
+    return np.stack(_rate_terms(np.sin(a[..., 1]), np.cos(a[..., 1]), np.sin(a[..., 2]), np.cos(a[..., 2]),
+                                w[..., 0], w[..., 1], w[..., 2]), axis=-1)
+
+
+def _rate_terms(st, ct, ss, cs, w0, w1, w2):
+    """``(phi', theta', psi')`` from theta's and psi's sines and cosines and ``w_np^p``; plain arithmetic."""
+    dphi = (cs * w0 - ss * w1) / ct
+    return dphi, ss * w0 + cs * w1, w2 - st * dphi
 
 
 # --------------------------------------------------------------------------------------------------
@@ -313,7 +312,8 @@ def platform_rate(coeffs, w_cmd_p, f_p, exact=True):
         Specific force in p, m/s^2 (for the g-sensitive drift).
     exact : bool, optional
         ``G^-1 ((I + diag KT) w_cmd + eps)`` (default), or the first-order form
-        ``w_cmd + KT w_cmd - (G - I) w_cmd + eps`` (the paper's eq. 19, used by the filter).
+        ``w_cmd + KT w_cmd - (G - I) w_cmd + eps`` (the paper's eq. 19; its dropped products bias the
+        gyro terms, see the module notes).
 
     Returns
     -------
@@ -407,8 +407,9 @@ def measurement_unchecked(x, g):
 def state_derivative(state, w_cmd_p, lat, h=0.0):
     """The EKF's ``f(x)``: time derivative of the 45-vector under the torque command ``w_cmd_p``.
 
-    The coefficients are constant; the angle rates follow from the kinematics with the first-order
-    platform rate (eq. 19) through the Euler-angle rate relation (see the module notes).
+    The coefficients are constant; the angle rates follow from the kinematics with the exact platform
+    rate ``G^-1 ((I + diag KT) w_cmd + eps)`` (the simulator's) through the Euler-angle rate relation
+    (see the module notes).
 
     Parameters
     ----------
@@ -438,12 +439,13 @@ def state_derivative_unchecked(x, w, g, w_ie_n):
     f = g * C[..., 2, :]
     c = np.moveaxis(x, -1, 0)
     eps = np.stack(np.broadcast_arrays(*_drift_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
-    Mg_w = np.stack([c[21] * w[..., 1] + c[22] * w[..., 2], c[23] * w[..., 0] + c[24] * w[..., 2],
-                     c[25] * w[..., 0] + c[26] * w[..., 1]], axis=-1)
-    w_np = (1.0 + x[..., KT]) * w - Mg_w + eps - np.einsum("...ji,j->...i", C, w_ie_n)
+    rhs = (1.0 + x[..., KT]) * w + eps
+    G = np.broadcast_to(np.eye(3), x.shape[:-1] + (3, 3)).copy()
+    G[..., 0, 1], G[..., 0, 2], G[..., 1, 0] = x[..., 21], x[..., 22], x[..., 23]
+    G[..., 1, 2], G[..., 2, 0], G[..., 2, 1] = x[..., 24], x[..., 25], x[..., 26]
+    w_ip = np.linalg.solve(G, rhs[..., None])[..., 0]
+    w_np = w_ip - np.einsum("...ji,j->...i", C, w_ie_n)
     rates = _angle_rates(ang, w_np)
     out = np.zeros(np.broadcast_shapes(x.shape[:-1], rates.shape[:-1]) + (N_STATES,))
     out[..., ANGLES] = rates
     return out
-
-
