@@ -217,6 +217,8 @@ class CalibrationResult:
     first_pass : CalibrationResult or None
         With more than one pass, the first (causal, real-time) EKF pass; its attitude history is the one
         whose settling time means something (later passes start from an estimate that used all the data).
+    scale : ndarray, shape (45,)
+        The prior standard deviations D that scale ``information`` (SI).
     """
 
     t: np.ndarray
@@ -225,6 +227,16 @@ class CalibrationResult:
     figures: dict = None
     information: np.ndarray = None
     first_pass: "CalibrationResult" = None
+    scale: np.ndarray = None
+
+    def bound(self):
+        """Information bound of the coefficients and angles (45,), SI: ``D sqrt(diag((I + information)^-1))``,
+        the standard deviations an efficient estimator reaches with this run's prior and outputs (the
+        Cramer-Rao bound of the linearised model, the gyros' white drift left out). None without
+        ``information``."""
+        if self.information is None:
+            return None
+        return self.scale * np.sqrt(np.diag(np.linalg.inv(np.eye(len(self.scale)) + self.information)))
 
     def final(self, last_s=100.0):
         """The paper's readout, (45,): coefficients averaged over the last ``last_s`` seconds; the angles
@@ -379,7 +391,7 @@ class RollingEKF:
         from .rolling_observability import information_rank  # it builds on this module's Jacobians
 
         figures = {"information_rank": information_rank(info), "informed_directions": informed_directions(info)}
-        return CalibrationResult(t, xs, sig, figures, info)
+        return CalibrationResult(t, xs, sig, figures, info, scale=D)
 
     def report_figures(self, folder, scheme, lat, h=0.0):
         """The output-sensitivity curves of ``scheme`` (seed 002 Figs. 4-7) into ``folder``; [(file, caption)]."""

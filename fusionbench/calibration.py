@@ -18,7 +18,8 @@ its causal first pass, ``result.first_pass``; ``first_pass`` then also reports t
 group maxima); ``limits_arcmin`` are 0 (the coefficients, biases included, are estimated, so the
 stationary-alignment limits do not apply). Per method, ``coefficients`` holds per coefficient the
 estimation error mean and standard deviation over runs and the mean predicted sigma, in the customary
-unit named beside them, and ``groups`` the largest |mean error| of each group.
+unit named beside them (and ``bound``, the information bound of the run's outputs, when the method
+gives one: ``result.bound()``), and ``groups`` the largest |mean error| of each group.
 """
 
 from __future__ import annotations
@@ -199,7 +200,9 @@ def _one_run(scn, spec, method_names, k, seed):
                            for r in (res, causal))  # (M, 3) rad, ENU
         first = causal.final(spec.readout_s)[:pf.N_COEFFS] - truth[-1, :pf.N_COEFFS]
         est = np.asarray(res.final(spec.readout_s))
+        bound = res.bound() if hasattr(res, "bound") else None
         out[name] = {"err": est[:pf.N_COEFFS] - truth[-1, :pf.N_COEFFS], "sigma": res.sigma[-1, :pf.N_COEFFS],
+                     "bound": None if bound is None else bound[:pf.N_COEFFS],
                      "phi": phi, "phi_causal": phi_causal, "err_causal": first, "passes": 1 + (causal is not res),
                      "wall": wall, "figures": dict(getattr(res, "figures", {}) or {}),
                      "x": res.x if k == 0 else None, "sig_hist": res.sigma if k == 0 else None,
@@ -240,7 +243,8 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1)
         outcomes[name] = {"phi": np.stack([r["phi"] for r in rs]), "err": np.stack([r["err"] for r in rs]),
                           "phi_causal": np.stack([r["phi_causal"] for r in rs]), "passes": rs[0]["passes"],
                           "err_causal": np.stack([r["err_causal"] for r in rs]),
-                          "sigma": np.stack([r["sigma"] for r in rs]), "wall": sum(r["wall"] for r in rs),
+                          "sigma": np.stack([r["sigma"] for r in rs]),
+                          "bound": None if rs[0]["bound"] is None else np.stack([r["bound"] for r in rs]), "wall": sum(r["wall"] for r in rs),
                           "figures": rs[0]["figures"], "x": rs[0]["x"], "sig_hist": rs[0]["sig_hist"],
                           "truth": rs[0]["truth"]}
     return CalibrationOutput(scn, _metrics(scn, spec, outcomes, t, runs, seed, quick, total), t, outcomes)
@@ -257,6 +261,10 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
         coeffs = {n: {"unit": u, "error_mean": float(err[:, i].mean()), "error_std": float(err[:, i].std()),
                       "sigma_mean": float(sig[:, i].mean())}
                   for i, (n, u) in enumerate(zip(pf.COEFF_NAMES, pf.COEFF_CUSTOMARY_UNITS))}
+        if oc.get("bound") is not None:  # the information bound of each coefficient (mean over runs)
+            bnd = pf.to_customary(oc["bound"]).mean(axis=0)
+            for i, n in enumerate(pf.COEFF_NAMES):
+                coeffs[n]["bound"] = float(bnd[i])
         entry = {
             "final_error_arcmin": {ax: metrics.stats(phi[:, -1, i]) for i, ax in enumerate("ENU")},
             "settling_time_s": {"U": metrics.stats(metrics.settling_time(t, oc["phi_causal"][..., 2] / units.ARCMIN, band)),
@@ -273,6 +281,9 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
                 "final_error_arcmin": {ax: metrics.stats(oc["phi_causal"][:, -1, i] / units.ARCMIN)
                                        for i, ax in enumerate("ENU")},
                 "groups": {g: {"max_abs_error_mean": float(np.abs(ec[:, sl].mean(axis=0)).max())} for g, sl, _ in GROUPS}}
+        if oc.get("bound") is not None:
+            for g, sl, _ in GROUPS:
+                entry["groups"][g]["bound_max"] = float(bnd[sl].max())
         entry.update(oc["figures"])
         out["methods"][name] = entry
         for key in ("information_rank",):
