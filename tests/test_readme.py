@@ -3,6 +3,7 @@
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 
@@ -25,3 +26,17 @@ def test_readme_damping_example_runs(capsys):
     exec(compile(code, "README.md", "exec"), ns)
     assert ns["phi"].shape == (2, 4000, 3)
     assert "q now" in capsys.readouterr().out
+
+
+def test_readme_platform_example_runs_and_meets_its_bound(capsys):
+    text = (Path(__file__).parents[1] / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    code = next(b for b in blocks if "information_rank" in b)
+    ns = {}
+    exec(compile(code, "README.md", "exec"), ns)
+    assert "rank 45" in capsys.readouterr().out
+    # the torquer errors within 3 of the filter's sigmas, and those within 2 of the information bound
+    pf = ns["pf"]
+    sig = pf.to_customary(ns["res"].sigma[-1, :42])[pf.KT]
+    bound = pf.to_customary(ns["bound"][:42])[pf.KT]
+    assert np.all(np.abs(ns["err"][pf.KT]) < 3 * sig) and np.all(sig < 2 * bound)
