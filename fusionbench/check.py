@@ -6,6 +6,8 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
 * azimuth settling time, mean: new > ref * (1 + REL_TOL) + ABS_TOL_S;
 * level RMSE in the scenario's window (``window_rmse_arcmin``), where the reference has it: as the final error;
 * ``reduction_percent`` of a scenario comparing two methods: new < ref - ABS_TOL_PERCENT;
+* platform calibration (``groups`` in the reference): a group's largest |mean error| new > ref * (1 + REL_TOL)
+  (customary units); ``information_rank`` below the reference's;
 * a method of the reference missing from the run.
 
 Same scenario, seed and size give identical numbers on one machine; the tolerances absorb
@@ -49,6 +51,14 @@ def compare(new: dict, ref: dict):
             allowed = rv * (1 + REL_TOL) + ABS_TOL_ARCMIN
             if not nv <= allowed:
                 bad.append((name, "window level RMSE (arcmin)", rv, nv, allowed))
+        for g, rg in r.get("groups", {}).items():
+            rv = rg["max_abs_error_mean"]
+            nv = n.get("groups", {}).get(g, {}).get("max_abs_error_mean", float("nan"))
+            allowed = rv * (1 + REL_TOL)
+            if not nv <= allowed:
+                bad.append((name, f"{g} max |mean error| ({rg.get('unit', '')})", rv, nv, allowed))
+        if "information_rank" in r and not n.get("information_rank", -1) >= r["information_rank"]:
+            bad.append((name, "information rank", r["information_rank"], n.get("information_rank"), r["information_rank"]))
     if "reduction_percent" in ref:
         rv, nv = ref["reduction_percent"], new.get("reduction_percent", float("nan"))
         if not nv >= rv - ABS_TOL_PERCENT:
