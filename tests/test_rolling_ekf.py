@@ -153,3 +153,28 @@ def test_compiled_kernels_match_the_platform_model():
         assert np.abs(out[pf.ANGLES] - x[pf.ANGLES]).max() < 0.1  # continuous: no jump of 2 pi (at theta 80 deg
         # the angles move up to 1 / cos(theta) times the 2e-3 rad turn)
         assert np.array_equal(out[:pf.N_COEFFS], x[:pf.N_COEFFS] + e[:pf.N_COEFFS])
+
+
+def test_second_pass_reaches_the_information_bound():
+    """Without process noise the second pass is a linear Kalman filter, so its final coefficient sigmas
+    are the inverse of prior + information: equal to ``bound()`` (1.0000 measured). That bound in turn
+    agrees with the scheme's PWCS information matrix computed independently along the commanded path
+    (baselines.rolling_observability, expm per step) to 3.4 % (the paths differ by the truths' drift)."""
+    from fusionbench import scenarios
+    from fusionbench.calibration import draw_truth
+    from baselines.rolling_observability import information_matrix
+
+    scn = scenarios.get("paper002-rolling")
+    spec = scn.platform.scaled(1800.0)
+    c, a = draw_truth(spec, 0, 0)
+    run = pf.simulate(spec.scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    res = R.RollingEKF(gyro_noise=0.0).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
+    bound = res.bound()[:pf.N_COEFFS]
+    assert np.abs(res.sigma[-1, :pf.N_COEFFS] / bound - 1.0).max() < 1e-3
+    M = information_matrix(spec.scheme, scn.site.lat, C0=pf.angles_to_dcm(a), coeffs=c, step_s=spec.scheme.filter_s)
+    pwcs = R.prior_sigma() * np.sqrt(np.diag(np.linalg.inv(np.eye(pf.N_STATES) + M)))
+    assert np.abs(bound / pwcs[:pf.N_COEFFS] - 1.0).max() < 0.05
+    # the gyros' white drift (paper level) raises the sigmas above that bound, by up to 40 % here
+    noisy = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
+    ratio = noisy.sigma[-1, :pf.N_COEFFS] / noisy.bound()[:pf.N_COEFFS]
+    assert ratio.min() > 0.999 and ratio.max() > 1.1
