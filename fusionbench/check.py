@@ -7,7 +7,9 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
 * level RMSE in the scenario's window (``window_rmse_arcmin``), where the reference has it: as the final error;
 * ``reduction_percent`` of a scenario comparing two methods: new < ref - ABS_TOL_PERCENT;
 * platform calibration (``groups`` in the reference): a group's largest |mean error| new > ref * (1 + REL_TOL)
-  (customary units); ``information_rank`` below the reference's;
+  (customary units). The information rank is not guarded: on a short scheme the singular values decay
+  through the rank tolerance without a gap (``--quick`` of paper002-rolling: the 32nd sits at 1e-12.0),
+  so the count is not a stable figure there;
 * a method of the reference missing from the run.
 
 Same scenario, seed and size give identical numbers on one machine; the tolerances absorb
@@ -57,8 +59,6 @@ def compare(new: dict, ref: dict):
             allowed = rv * (1 + REL_TOL)
             if not nv <= allowed:
                 bad.append((name, f"{g} max |mean error| ({rg.get('unit', '')})", rv, nv, allowed))
-        if "information_rank" in r and not n.get("information_rank", -1) >= r["information_rank"]:
-            bad.append((name, "information rank", r["information_rank"], n.get("information_rank"), r["information_rank"]))
     if "reduction_percent" in ref:
         rv, nv = ref["reduction_percent"], new.get("reduction_percent", float("nan"))
         if not nv >= rv - ABS_TOL_PERCENT:

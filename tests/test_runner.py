@@ -96,17 +96,15 @@ def test_check_flags_only_regressions():
     rows = compare(worse, ref)
     assert [r[1] for r in rows] == ["final phiU |rms| (arcmin)", "settling U mean (s)"]
     assert compare({"methods": {}}, ref)[0][1] == "method missing from run"
-    # a calibration scenario's coefficient groups and information rank are guarded too
+    # a calibration scenario's coefficient groups are guarded too
     cal = json.loads(json.dumps(ref))
     cal["methods"]["m"]["groups"] = {"torquer scale": {"max_abs_error_mean": 2.0, "unit": "ppm"}}
-    cal["methods"]["m"]["information_rank"] = 45
     ok = json.loads(json.dumps(cal))
     ok["methods"]["m"]["groups"]["torquer scale"]["max_abs_error_mean"] = 2.1
     assert compare(ok, cal) == []
     bad = json.loads(json.dumps(cal))
     bad["methods"]["m"]["groups"]["torquer scale"]["max_abs_error_mean"] = 2.5
-    bad["methods"]["m"]["information_rank"] = 44
-    assert [r[1] for r in compare(bad, cal)] == ["torquer scale max |mean error| (ppm)", "information rank"]
+    assert [r[1] for r in compare(bad, cal)] == ["torquer scale max |mean error| (ppm)"]
 
 
 def test_imu_overrides_are_converted_from_customary_units(tmp_path):
