@@ -206,6 +206,8 @@ def _one_run(scn, spec, method_names, k, seed):
                      "phi": phi, "phi_causal": phi_causal, "err_causal": first, "passes": 1 + (causal is not res),
                      "wall": wall, "figures": dict(getattr(res, "figures", {}) or {}),
                      "x": res.x if k == 0 else None, "sig_hist": res.sigma if k == 0 else None,
+                     "x_causal": causal.x if k == 0 and causal is not res else None,
+                     "sig_causal": causal.sigma if k == 0 and causal is not res else None,
                      "truth": truth[:, :pf.N_COEFFS] if k == 0 else None}
     return out
 
@@ -246,6 +248,7 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1)
                           "sigma": np.stack([r["sigma"] for r in rs]),
                           "bound": None if rs[0]["bound"] is None else np.stack([r["bound"] for r in rs]), "wall": sum(r["wall"] for r in rs),
                           "figures": rs[0]["figures"], "x": rs[0]["x"], "sig_hist": rs[0]["sig_hist"],
+                          "x_causal": rs[0]["x_causal"], "sig_causal": rs[0]["sig_causal"],
                           "truth": rs[0]["truth"]}
     return CalibrationOutput(scn, _metrics(scn, spec, outcomes, t, runs, seed, quick, total), t, outcomes)
 

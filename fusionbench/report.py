@@ -232,23 +232,30 @@ def _table(m):
 
 
 def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y", "K1_Y", "A_YX", "KT_X")):
-    """Run 0's estimates of a few coefficients against truth with their 3-sigma envelopes (customary units)."""
+    """Run 0's estimates of a few coefficients against truth with their 3-sigma envelopes (customary units);
+    for a multi-pass method its causal first pass too (the convergence a real-time filter shows)."""
     from . import platform as pf
 
     fig, axes = plt.subplots(len(names) // 2, 2, figsize=(10, 2.2 * (len(names) // 2)), sharex=True)
     for name, oc in out.outcomes.items():
         if oc["x"] is None:
             continue
+        hists = [(f"{name}", oc["x"], oc["sig_hist"])]
+        if oc.get("x_causal") is not None:
+            hists = [(f"{name}, first (causal) pass", oc["x_causal"], oc["sig_causal"]),
+                     (f"{name}, final pass", oc["x"], oc["sig_hist"])]
         for ax, n in zip(axes.ravel(), names):
             i = pf.COEFF_NAMES.index(n)
             sc = pf.COEFF_SCALE[i]
-            est, sig = oc["x"][:, i] / sc, oc["sig_hist"][:, i] / sc
-            (line,) = ax.plot(out.t, est, lw=1, label=f"{name} estimate")
-            ax.fill_between(out.t, est - 3 * sig, est + 3 * sig, color=line.get_color(), alpha=0.15)
+            lim = abs(oc["truth"][0, i] / sc) * 3 + 1e-12
+            for label, x, sg in hists:
+                est, sig = x[:, i] / sc, sg[:, i] / sc
+                (line,) = ax.plot(out.t, est, lw=1, label=f"{label} estimate")
+                ax.fill_between(out.t, est - 3 * sig, est + 3 * sig, color=line.get_color(), alpha=0.15)
+                lim = max(lim, abs(oc["truth"][0, i] / sc) * 3 + 3 * sig[-1])
             ax.axhline(oc["truth"][0, i] / sc, color="k", ls="--", lw=1, label="truth")
             ax.set_ylabel(f"{n} ({pf.COEFF_CUSTOMARY_UNITS[i]})", fontsize=8)
             ax.grid(alpha=0.3)
-            lim = abs(oc["truth"][0, i] / sc) * 3 + 3 * sig[-1] + 1e-12
             ax.set_ylim(-lim, lim)
         break
     axes.ravel()[0].legend(fontsize=7)
