@@ -292,7 +292,10 @@ class RollingEKF:
     passes : int
         1: the causal EKF alone (what a real-time system can run). 2 (default): then a linearised Kalman
         filter about the first pass's estimate carried back to the start (module notes, "Second pass").
-        Each further pass relinearises about the last.
+        Each further pass relinearises about the last (Gauss-Newton). Measured on ``paper002-rolling``
+        with noise: two passes land within 3.3 sigmas for initial azimuth errors of -5, 3 and 5 deg; at
+        10 deg the first pass ends outside the linear range and two passes are 118 sigmas off, three
+        within 2.5.
     """
 
     name = "rolling-ekf"
