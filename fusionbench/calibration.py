@@ -30,6 +30,7 @@ from importlib.metadata import entry_points
 
 import numpy as np
 from joblib import Parallel, delayed
+from tqdm import tqdm
 
 from . import metrics, units
 from .aligner import load_entry
@@ -223,8 +224,9 @@ class CalibrationOutput:
     outcomes: dict
 
 
-def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1):
-    """Monte Carlo of a platform-rolling scenario (see the module notes); returns a CalibrationOutput."""
+def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=False):
+    """Monte Carlo of a platform-rolling scenario (see the module notes); returns a CalibrationOutput.
+    ``progress``: a tqdm bar over runs."""
     methods = list(methods or scn.methods)
     for m in methods:
         scn.calibrator(m)
@@ -234,9 +236,11 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1)
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
     spec = scn.platform.scaled(duration)
     if n_jobs == 1 or runs == 1:
-        results = [_one_run(scn, spec, methods, k, seed) for k in range(runs)]
-    else:
-        results = Parallel(n_jobs=n_jobs)(delayed(_one_run)(scn, spec, methods, k, seed) for k in range(runs))
+        done = (_one_run(scn, spec, methods, k, seed) for k in range(runs))
+    else:  # in run order whatever the worker that finished first
+        done = Parallel(n_jobs=n_jobs, return_as="generator")(
+            delayed(_one_run)(scn, spec, methods, k, seed) for k in range(runs))
+    results = list(tqdm(done, total=runs, desc=scn.name, unit="run", disable=not progress))
     total = sum(s.duration for s in spec.scheme.segments)
     t = np.arange(1, int(round(total / spec.scheme.filter_s)) + 1) * spec.scheme.filter_s  # the filter times
     outcomes = {}

@@ -145,7 +145,8 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     if scn.experiment == "platform-rolling":
         from .calibration import run_calibration
 
-        return run_calibration(scn, methods, runs, seed, quick, n_jobs)
+        return run_calibration(scn, methods, runs, seed, quick, n_jobs,
+                               progress=sys.stderr.isatty() if progress is None else progress)
     methods = list(methods or scn.methods)
     for m in methods:  # fail early, with the method's own message
         scn.method(m)
