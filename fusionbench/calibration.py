@@ -199,12 +199,15 @@ def _one_run(scn, spec, method_names, k, seed):
         causal = getattr(res, "first_pass", None) or res
         phi, phi_causal = (metrics.misalignment_history(pf.angles_to_dcm(r.x[:, pf.ANGLES])[None], run.C_pn[0])[0]
                            for r in (res, causal))  # (M, 3) rad, ENU
+        settle = metrics.settling_time(run.t, phi_causal[None, :, 2] / units.ARCMIN, scn.settling_band_arcmin)[0]
         first = causal.final(spec.readout_s)[:pf.N_COEFFS] - truth[-1, :pf.N_COEFFS]
         est = np.asarray(res.final(spec.readout_s))
         bound = res.bound() if hasattr(res, "bound") else None
+        # the histories go back as squares only, summed over runs by the caller (memory independent of runs)
         out[name] = {"err": est[:pf.N_COEFFS] - truth[-1, :pf.N_COEFFS], "sigma": res.sigma[-1, :pf.N_COEFFS],
                      "bound": None if bound is None else bound[:pf.N_COEFFS],
-                     "phi": phi, "phi_causal": phi_causal, "err_causal": first, "passes": 1 + (causal is not res),
+                     "phi2": phi ** 2, "phi2_causal": phi_causal ** 2, "phi_end": phi[-1], "phi_end_causal": phi_causal[-1],
+                     "settle": settle, "err_causal": first, "passes": 1 + (causal is not res),
                      "wall": wall, "figures": dict(getattr(res, "figures", {}) or {}),
                      "x": res.x if k == 0 else None, "sig_hist": res.sigma if k == 0 else None,
                      "x_causal": causal.x if k == 0 and causal is not res else None,
@@ -215,8 +218,12 @@ def _one_run(scn, spec, method_names, k, seed):
 
 @dataclass
 class CalibrationOutput:
-    """A finished calibration scenario: ``metrics`` (the metrics.json mapping), per method the time
-    ``t`` and misalignment histories ``phi`` (runs, M, 3) rad, and run 0's estimate history for figures."""
+    """A finished calibration scenario: ``metrics`` (the metrics.json mapping), the filter times ``t`` (M,)
+    and per method in ``outcomes``: per run (leading axis) ``err``, ``sigma``, ``bound`` (coefficients, SI),
+    ``phi_end`` (3, rad, ENU) and ``settle`` (s), the same ``_causal`` for the first pass; over runs the rms
+    misalignment histories ``phi_rms`` and ``phi_rms_causal`` (M, 3) rad; run 0's estimate histories
+    ``x``, ``sig_hist`` (and ``x_causal``, ``sig_causal``) and true coefficients ``truth`` for figures.
+    Memory does not grow with the number of runs beyond a few hundred numbers per run."""
 
     scenario: object
     metrics: dict
@@ -240,21 +247,37 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1,
     else:  # in run order whatever the worker that finished first
         done = Parallel(n_jobs=n_jobs, return_as="generator")(
             delayed(_one_run)(scn, spec, methods, k, seed) for k in range(runs))
-    results = list(tqdm(done, total=runs, desc=scn.name, unit="run", disable=not progress))
+    acc = {name: {} for name in methods}
+    for r in tqdm(done, total=runs, desc=scn.name, unit="run", disable=not progress):
+        for name in methods:
+            _accumulate(acc[name], r[name])
     total = sum(s.duration for s in spec.scheme.segments)
     t = np.arange(1, int(round(total / spec.scheme.filter_s)) + 1) * spec.scheme.filter_s  # the filter times
     outcomes = {}
-    for name in methods:
-        rs = [r[name] for r in results]
-        outcomes[name] = {"phi": np.stack([r["phi"] for r in rs]), "err": np.stack([r["err"] for r in rs]),
-                          "phi_causal": np.stack([r["phi_causal"] for r in rs]), "passes": rs[0]["passes"],
-                          "err_causal": np.stack([r["err_causal"] for r in rs]),
-                          "sigma": np.stack([r["sigma"] for r in rs]),
-                          "bound": None if rs[0]["bound"] is None else np.stack([r["bound"] for r in rs]), "wall": sum(r["wall"] for r in rs),
-                          "figures": rs[0]["figures"], "x": rs[0]["x"], "sig_hist": rs[0]["sig_hist"],
-                          "x_causal": rs[0]["x_causal"], "sig_causal": rs[0]["sig_causal"],
-                          "truth": rs[0]["truth"]}
+    for name, a in acc.items():
+        oc = {key: (None if v[0] is None else np.stack(v)) for key, v in a["per_run"].items()}
+        oc.update({key: v for key, v in a.items() if key != "per_run"})
+        oc["phi_rms"] = np.sqrt(oc.pop("phi2") / runs)
+        oc["phi_rms_causal"] = np.sqrt(oc.pop("phi2_causal") / runs)
+        outcomes[name] = oc
     return CalibrationOutput(scn, _metrics(scn, spec, outcomes, t, runs, seed, quick, total), t, outcomes)
+
+
+_PER_RUN = ("err", "err_causal", "sigma", "bound", "phi_end", "phi_end_causal", "settle")
+_RUN0 = ("passes", "figures", "x", "sig_hist", "x_causal", "sig_causal", "truth")
+
+
+def _accumulate(a, r):
+    """Fold one run's outcome ``r`` (from :func:`_one_run`) into the method's accumulator ``a``: per-run
+    figures listed, squared attitude histories summed, wall times summed, run 0's histories kept."""
+    if not a:
+        a.update({key: r[key] for key in _RUN0})
+        a.update(per_run={key: [] for key in _PER_RUN}, phi2=0.0, phi2_causal=0.0, wall=0.0)
+    for key in _PER_RUN:
+        a["per_run"][key].append(r[key])
+    a["phi2"] = a["phi2"] + r["phi2"]
+    a["phi2_causal"] = a["phi2_causal"] + r["phi2_causal"]
+    a["wall"] += r["wall"]
 
 
 def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
@@ -262,7 +285,7 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
     out = {"scenario": scn.name, "runs": runs, "seed": int(seed), "duration_s": float(duration), "quick": bool(quick),
            "limits_arcmin": {"E": 0.0, "N": 0.0, "U": 0.0}, "methods": {}}
     for name, oc in outcomes.items():
-        phi = oc["phi"] / units.ARCMIN
+        phi_end = oc["phi_end"] / units.ARCMIN
         err = pf.to_customary(oc["err"])
         sig = pf.to_customary(oc["sigma"])
         coeffs = {n: {"unit": u, "error_mean": float(err[:, i].mean()), "error_std": float(err[:, i].std()),
@@ -273,9 +296,8 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
             for i, n in enumerate(pf.COEFF_NAMES):
                 coeffs[n]["bound"] = float(bnd[i])
         entry = {
-            "final_error_arcmin": {ax: metrics.stats(phi[:, -1, i]) for i, ax in enumerate("ENU")},
-            "settling_time_s": {"U": metrics.stats(metrics.settling_time(t, oc["phi_causal"][..., 2] / units.ARCMIN, band)),
-                                "band_arcmin": band},
+            "final_error_arcmin": {ax: metrics.stats(phi_end[:, i]) for i, ax in enumerate("ENU")},
+            "settling_time_s": {"U": metrics.stats(oc["settle"]), "band_arcmin": band},
             "wall_s": float(oc["wall"]),
             "coefficients": coeffs,
             "groups": {g: {"max_abs_error_mean": float(np.abs(err[:, sl].mean(axis=0)).max()),
@@ -285,7 +307,7 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
         if oc["passes"] > 1:  # what the causal first pass alone reaches
             ec = pf.to_customary(oc["err_causal"])
             entry["first_pass"] = {
-                "final_error_arcmin": {ax: metrics.stats(oc["phi_causal"][:, -1, i] / units.ARCMIN)
+                "final_error_arcmin": {ax: metrics.stats(oc["phi_end_causal"][:, i] / units.ARCMIN)
                                        for i, ax in enumerate("ENU")},
                 "groups": {g: {"max_abs_error_mean": float(np.abs(ec[:, sl].mean(axis=0)).max())} for g, sl, _ in GROUPS}}
         if oc.get("bound") is not None:

@@ -271,11 +271,11 @@ def _calibration_report(out, folder):
     scn = out.scenario
     fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
     for name, oc in out.outcomes.items():
-        rms = np.sqrt(np.mean(oc["phi"] ** 2, axis=0)) / units.ARCSEC
+        rms = oc["phi_rms"] / units.ARCSEC
         for i, ax in enumerate(axes):
             line, = ax.semilogy(out.t, rms[:, i], lw=1, label=name)
             if oc.get("passes", 1) > 1:
-                first = np.sqrt(np.mean(oc["phi_causal"][:, :, i] ** 2, axis=0)) / units.ARCSEC
+                first = oc["phi_rms_causal"][:, i] / units.ARCSEC
                 ax.semilogy(out.t, first, lw=0.8, ls="--", color=line.get_color(), label=f"{name}, first (causal) pass")
     for i, ax in enumerate(axes):
         ax.set_ylabel(f"rms phi{'ENU'[i]} (arcsec)")
