@@ -9,7 +9,7 @@ can check a scheme of their own before running the filter.
 
 Model
 -----
-The filter's linearised error-state model (:func:`baselines.rolling_ekf.error_jacobians`)::
+The filter's linearised error-state model (:func:`baselines.rolling_jacobians.error_jacobians`)::
 
     e = [c_true - c_est (42, SI), eta (3, rad)],   C_true = (I - [eta x]) C_est   (eta: rotation in ENU)
     de/dt = F_e(x(t), w_cmd(t)) e,   dy = H_e(x(t)) e + v,   v ~ N(0, R),  R = accel_noise^2 I_3
@@ -82,7 +82,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from baselines.rolling_ekf import error_jacobians, prior_sigma
+from baselines.rolling_ekf import prior_sigma
+from baselines.rolling_jacobians import error_jacobians
 from fusionbench import earth, units
 from fusionbench import platform as pf
 

@@ -229,6 +229,17 @@ def test_filter_model_matches_the_simulator():
         assert np.abs(pf.state_derivative(xg, run.w_cmd[0, k], LAT)[42:] - fd).max() > 1e-8
 
 
+def test_attitude_rate_is_the_simulators():
+    """dC_pn/dt of the exact model against a central difference of the simulated attitude (5.5 s)."""
+    a0 = np.array([30.0, 20.0, 40.0]) * D
+    run = quiet(pf.Scheme(((SOUTH, 0.1 * D, 10.0),), filter_s=0.01), _COEFFS, pf.angles_to_dcm(a0))
+    k = int(round(5.5 / 0.01)) - 1
+    fd = (run.C_pn[0, k + 1] - run.C_pn[0, k - 1]) / 0.02
+    dC = pf.attitude_rate(_COEFFS, run.C_pn[0, k], run.w_cmd[0, k], LAT)
+    assert np.abs(dC - fd).max() < 1e-12
+    assert np.abs(pf.attitude_rate(_COEFFS, run.C_pn[0, k], run.w_cmd[0, k], LAT, exact=False) - fd).max() > 1e-10
+
+
 def test_noise_levels_and_reproducibility():
     sg, sa = 0.05 * units.DEG_PER_H, 1.0 * units.UG
     run = pf.simulate(still(20.0), np.zeros(42), C_ZERO, LAT, gyro_noise=sg, accel_noise=sa, seed=7, runs=50)

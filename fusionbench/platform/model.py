@@ -351,19 +351,13 @@ def attitude_rate(coeffs, C_pn, w_cmd_p, lat, h=0.0, exact=True):
     -------
     ndarray, shape (..., 3, 3)
     """
-    w_np = _relative_rate(coeffs, C_pn, w_cmd_p, lat, h, exact)
+    C = _check_dcm(C_pn)
+    w_np = platform_rate(coeffs, w_cmd_p, specific_force_p(C, lat, h), exact=exact)
+    w_np = w_np - np.einsum("...ji,j->...i", C, earth.earth_rate_n(lat))
     z = np.zeros(w_np.shape[:-1])
     x, y, w = w_np[..., 0], w_np[..., 1], w_np[..., 2]
     K = np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
-    return np.asarray(C_pn, dtype=float) @ K
-
-
-def _relative_rate(coeffs, C_pn, w_cmd_p, lat, h, exact):
-    C = _check_dcm(C_pn)
-    f_p = specific_force_p(C, lat, h)
-    w_ip = platform_rate(coeffs, w_cmd_p, f_p, exact=exact)
-    w_ie = earth.earth_rate_n(lat)
-    return w_ip - np.einsum("...ji,j->...i", C, w_ie)
+    return C @ K
 
 
 def accel_output(coeffs, f_p):
