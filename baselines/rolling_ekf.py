@@ -207,7 +207,8 @@ class RollingEKF:
         one moves no coefficient by more than :data:`AUTO_TOLERANCE` of its sigma from the pass before
         (the linearisation point was already the answer), at most :data:`AUTO_MAX_PASSES` in all. The count
         is in ``result.figures["passes"]`` and the last pass's largest move, in sigmas, in
-        ``result.figures["last_pass_move_sigma"]``; a large one says the passes have not converged. Measured on ``paper002-rolling``
+        ``result.figures["last_pass_move_sigma"]``. From the third pass on a large move says the passes have
+        not converged; the second always moves far from the first, whose R was inflated. Measured on ``paper002-rolling``
         with noise: two passes land within 3.3 sigmas for initial azimuth errors of -5, 3 and 5 deg; at
         10 deg the first pass ends outside the linear range and two passes are 118 and 1682 sigmas off on
         two draws; three passes land within 2.5 sigmas on the first, ``"auto"`` (5 passes) within 2.2 on the
