@@ -102,3 +102,14 @@ def test_bad_platform_fields_are_named(tmp_path, edit, field):
     with pytest.raises(scenarios.ScenarioError) as exc:
         _load(tmp_path, TOML.replace(edit, bad, 1))
     assert field in str(exc.value) and "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("option,message", [('passes = "three"', "passes: expected a whole number >= 1 or 'auto'"),
+                                            ("pases = 3", "unexpected keyword argument 'pases'")])
+def test_bad_method_options_name_the_variant(tmp_path, option, message):
+    text = TOML.replace('methods = ["rolling-ekf"]', 'methods = ["ekf3"]') + f'[variants.ekf3]\nmethod = "rolling-ekf"\n{option}\n'
+    scn = _load(tmp_path, text)
+    with pytest.raises(scenarios.ScenarioError) as exc:
+        run_scenario(scn)
+    assert "r.toml: field 'variants.ekf3'" in str(exc.value) and message in str(exc.value)
+    assert "\n" not in str(exc.value)

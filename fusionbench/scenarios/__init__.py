@@ -173,15 +173,22 @@ class Scenario:
 
         if name in self.variants:
             options = dict(self.variants[name])
-            return load_calibrator(options.pop("method"), **options)
+            return self._variant(name, load_calibrator, options.pop("method"), options)
         return load_calibrator(name)
 
     def method(self, name):
         """Instantiate a method by scenario variant name, registered name or ``module:Class`` path."""
         if name in self.variants:
             options = dict(self.variants[name])
-            return load_method(options.pop("method"), **options)
+            return self._variant(name, load_method, options.pop("method"), options)
         return load_method(name)
+
+    def _variant(self, name, loader, spec, options):
+        """A variant's method; an option its class refuses is reported against the scenario's table."""
+        try:
+            return loader(spec, **options)
+        except (TypeError, ValueError) as exc:
+            raise ScenarioError(f"{_where(self.source, 'variants.' + name)}: {exc}") from None
 
 
 def _where(src, key):
