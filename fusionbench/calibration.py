@@ -207,7 +207,7 @@ def _one_run(scn, spec, method_names, k, seed):
         out[name] = {"err": est[:pf.N_COEFFS] - truth[-1, :pf.N_COEFFS], "sigma": res.sigma[-1, :pf.N_COEFFS],
                      "bound": None if bound is None else bound[:pf.N_COEFFS],
                      "phi2": phi ** 2, "phi2_causal": phi_causal ** 2, "phi_end": phi[-1], "phi_end_causal": phi_causal[-1],
-                     "settle": settle, "err_causal": first, "passes": 1 + (causal is not res),
+                     "settle": settle, "err_causal": first, "has_first_pass": causal is not res,
                      "wall": wall, "figures": dict(getattr(res, "figures", {}) or {}),
                      "x": res.x if k == 0 else None, "sig_hist": res.sigma if k == 0 else None,
                      "x_causal": causal.x if k == 0 and causal is not res else None,
@@ -264,7 +264,7 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1,
 
 
 _PER_RUN = ("err", "err_causal", "sigma", "bound", "phi_end", "phi_end_causal", "settle")
-_RUN0 = ("passes", "figures", "x", "sig_hist", "x_causal", "sig_causal", "truth")
+_RUN0 = ("has_first_pass", "figures", "x", "sig_hist", "x_causal", "sig_causal", "truth")
 
 
 def _accumulate(a, r):
@@ -304,7 +304,7 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
                            "unit": pf.COEFF_CUSTOMARY_UNITS[sl.start], "paper_below": claim}
                        for g, sl, claim in GROUPS},
         }
-        if oc["passes"] > 1:  # what the causal first pass alone reaches
+        if oc["has_first_pass"]:  # what the causal first pass alone reaches
             ec = pf.to_customary(oc["err_causal"])
             entry["first_pass"] = {
                 "final_error_arcmin": {ax: metrics.stats(oc["phi_end_causal"][:, i] / units.ARCMIN)

@@ -274,7 +274,7 @@ def _calibration_report(out, folder):
         rms = oc["phi_rms"] / units.ARCSEC
         for i, ax in enumerate(axes):
             line, = ax.semilogy(out.t, rms[:, i], lw=1, label=name)
-            if oc.get("passes", 1) > 1:
+            if oc.get("has_first_pass"):
                 first = oc["phi_rms_causal"][:, i] / units.ARCSEC
                 ax.semilogy(out.t, first, lw=0.8, ls="--", color=line.get_color(), label=f"{name}, first (causal) pass")
     for i, ax in enumerate(axes):

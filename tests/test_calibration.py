@@ -75,7 +75,7 @@ def test_run_metrics_follow_the_contract_and_do_not_depend_on_workers(tmp_path):
     # two passes: the settling time is the causal first pass's; its own end errors are reported beside
     oc = a.outcomes["rolling-ekf"]
     from fusionbench import units
-    assert oc["passes"] == 2 and oc["settle"].shape == (2,) and oc["phi_end_causal"].shape == (2, 3)
+    assert oc["has_first_pass"] and r["passes"] == 2 and oc["settle"].shape == (2,) and oc["phi_end_causal"].shape == (2, 3)
     assert r["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(oc["settle"]))
     assert r["first_pass"]["final_error_arcmin"]["U"]["rms"] == pytest.approx(
         np.sqrt(np.mean(oc["phi_end_causal"][:, 2] ** 2)) / units.ARCMIN)
