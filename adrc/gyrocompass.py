@@ -96,9 +96,9 @@ class ADRCGyrocompass:
         fit = AzimuthFit(R, h, site.lat, g)
         fit_from = int(round(self.fit_from_s / h))
         shot_step = max(int(round(self.shot_s / h)), fit_from + 4)
-        hist_t = np.empty(loop.steps)
-        hist_C = np.empty((R, loop.steps, 3, 3))
-        hist_az = np.full((R, loop.steps), np.nan)
+        hist_t = np.empty(loop.records)
+        hist_C = np.empty((R, loop.records, 3, 3))
+        hist_az = np.full((R, loop.records), np.nan)
         az_shot = np.full(R, np.nan)
         az = np.full(R, np.nan)
         every = max(1, int(round(0.1 / h)))  # the azimuth estimate is refreshed at 10 Hz
@@ -120,4 +120,10 @@ class ADRCGyrocompass:
             loop.omega_c = np.stack([u[:, 1], u[:, 0], np.zeros(R)], axis=-1)
             hist_t[j] = t
             hist_C[:, j] = C_out
+        t_last = loop.finish()  # the samples after the last ADRC step: the result ends at the last sample
+        if t_last is not None:
+            C_out = loop.sd.state.C_bn
+            if loop.steps > shot_step:
+                C_out = correct_azimuth(C_out, az if self.refine else az_shot)
+            hist_t[-1], hist_C[:, -1], hist_az[:, -1] = t_last, C_out, hist_az[:, -2]
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot, "azimuth_estimate_rad": hist_az})

@@ -313,11 +313,12 @@ class ESOTDAligner:
 
         reset_sum = np.zeros((R, 2))
         psi_fb = np.zeros((R, 3))
-        hist_t = np.empty(steps)
-        hist_C = np.empty((R, steps, 3, 3))
-        hist_psi = np.empty((R, steps, 3))
-        hist_fb = np.empty((R, steps, 3))
-        hist_y = np.empty((R, steps, 2))
+        records = steps + (t.size > steps * m)  # one more for the samples after the last step (time rule)
+        hist_t = np.empty(records)
+        hist_C = np.empty((R, records, 3, 3))
+        hist_psi = np.empty((R, records, 3))
+        hist_fb = np.empty((R, records, 3))
+        hist_y = np.empty((R, records, 2))
         for j in range(steps):
             out = sd.run(dth_b[j], dv_b[j], record_every=1)
             dv_samples = out["v_n"][..., :2] - vref_b[j][..., :2]
@@ -388,6 +389,10 @@ class ESOTDAligner:
                 psi = psi - d
             hist_psi[:, j] = psi
             hist_fb[:, j] = psi_fb
+        if records > steps:  # the samples after the last step, through the strapdown, the last estimate removed
+            sd.run(dth[:, steps * m:], dvel[:, steps * m:], record_every=t.size - steps * m)
+            hist_t[-1], hist_C[:, -1] = t[-1], apply_misalignment(sd.state.C_bn, -hist_psi[:, -2])
+            hist_psi[:, -1], hist_fb[:, -1], hist_y[:, -1] = hist_psi[:, -2], hist_fb[:, -2], hist_y[:, -2]
         return AlignmentResult(self.name, hist_t, hist_C, {"psi_hat_rad": hist_psi, "psi_feedback_rad": hist_fb,
                                                            "velocity_error_mps": hist_y})
 

@@ -116,8 +116,8 @@ class PIDGyrocompass:
         x_az = np.zeros(R)          # compass-loop filter state, m/s*s
         damp = np.zeros((R, 2))     # velocity removed by the damping terms so far, [E, N], m/s
         cmd = np.zeros((R, 3))
-        hist_t = np.empty(loop.steps)
-        hist_C = np.empty((R, loop.steps, 3, 3))
+        hist_t = np.empty(loop.records)
+        hist_C = np.empty((R, loop.records, 3, 3))
         az_shot = np.full(R, np.nan)
         for j, t, dv in loop:
             if j >= fit_from and j <= shot_step:
@@ -153,4 +153,7 @@ class PIDGyrocompass:
             loop.omega_c = cmd
             hist_t[j] = t
             hist_C[:, j] = loop.sd.state.C_bn
+        t_last = loop.finish()  # the samples after the last control period: the result ends at the last sample
+        if t_last is not None:
+            hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot})

@@ -168,14 +168,15 @@ class KalmanAligner:
         m = max(1, int(round(1.0 / (self.rate_hz * imu.dt))))
         T = m * imu.dt
         steps = (N - k0) // m
+        tail = N - k0 - steps * m  # samples after the last filter step, integrated at the end (time rule)
         qc = self._qc()
         P0 = self._p0()
         filters = [self._new_filter(P0) for _ in range(R)]
         eps_hat = np.zeros((R, 3))
         nab_hat = np.zeros((R, 3))
-        out_t = np.empty(steps)
-        out_C = np.empty((R, steps, 3, 3))
-        out_s = np.empty((R, steps, 3))
+        out_t = np.empty(steps + (tail > 0))
+        out_C = np.empty((R, steps + (tail > 0), 3, 3))
+        out_s = np.empty((R, steps + (tail > 0), 3))
         for j in range(steps):
             a, b = k0 + j * m, k0 + (j + 1) * m
             g_in = dth[:, a:b] - eps_hat[:, None] * imu.dt
@@ -206,6 +207,10 @@ class KalmanAligner:
             nab_hat += x[:, 8:11]
             out_t[j] = t[b - 1]
             out_C[:, j] = st.C_bn
+        if tail:  # the last samples, through the bias-compensated strapdown without an update
+            a = N - tail
+            sd.run(dth[:, a:] - eps_hat[:, None] * imu.dt, dv[:, a:] - nab_hat[:, None] * imu.dt, record_every=tail)
+            out_t[-1], out_C[:, -1], out_s[:, -1] = t[-1], sd.state.C_bn, out_s[:, -2] if steps else np.nan
         hist_t.append(out_t)
         hist_C.append(out_C)
         hist_s.append(out_s)

@@ -174,8 +174,10 @@ class DampedNavigator:
 
         Each IMUData chunk is of kind ``"increment"``; ``vref`` is the reference velocity (R, n, 3),
         ENU, m/s, at its samples, or None (needed only with ``accel_source="vref"``). ``dt`` is the
-        sample interval (s) and ``t0`` the time of the initial state (s); each chunk must hold a whole
-        number of network steps except the last (a trailing part step is dropped). Returns what
+        sample interval (s) and ``t0`` the time of the initial state (s). Samples left over after a
+        chunk's whole network steps are carried into the next chunk; those after the last whole step of
+        the data go through the strapdown alone (less than one step: the network's command over it turns
+        the attitude by well under 0.001 arcmin), so the history ends at the last sample. Returns what
         :meth:`align` returns.
         """
         if init is None:
@@ -186,21 +188,31 @@ class DampedNavigator:
             raise ValueError(f"damped-nav step_s: expected a whole number of samples of {dt:g} s, found {self.step_s:g} s")
         loop = None
         ts, Cs, qs = [], [], []
+        left = None  # samples after the last whole step: (t, dth, dv, vref)
         for ch, vref in chunks:
             t, dth, dv = ch.increments()
+            if left is not None and left[0].size:
+                t, dth, dv = (np.concatenate([a, b], axis=-1 if a.ndim == 1 else 1)
+                              for a, b in zip(left[:3], (t, dth, dv)))
+                vref = None if vref is None else np.concatenate([left[3], vref], axis=1)
             if loop is None:
                 runs = dth.shape[0] if runs is None else runs
                 loop = _Loop(self, site, initial_attitude(init, runs), dt, n_sub, t0)
-            steps = t.size // n_sub
-            if steps == 0:
+            n = (t.size // n_sub) * n_sub
+            left = (t[n:], dth[:, n:], dv[:, n:], None if vref is None else vref[:, n:])
+            if n == 0:
                 continue
-            n = steps * n_sub
             C, q = loop.run(dth[:, :n], dv[:, :n], None if vref is None else vref[:, :n])
             ts.append(t[n_sub - 1:n:n_sub])
             Cs.append(C)
             qs.append(q)
         if loop is None or not ts:
             raise ValueError(f"damped-nav data: expected at least one step of {self.step_s:g} s of samples, found none")
+        if left[0].size:  # the time rule: the history ends at the last sample
+            loop.sd.run(left[1], left[2], record_every=left[0].size)
+            ts.append(left[0][-1:])
+            Cs.append(loop.sd.state.C_bn[:, None].copy())
+            qs.append(qs[-1][:, -1:])
         q = np.concatenate(qs, axis=1)
         figures = {}
         if self.scheme != "undamped":

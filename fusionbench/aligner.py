@@ -8,6 +8,17 @@ in pyproject.toml like any plug-in; the core never imports them), or given as a
 
 A method never sees truth: it gets the IMU data, the site, an optional velocity reference and
 an optional initial attitude guess.
+
+Time rule (every method, every kind of input)
+---------------------------------------------
+An :class:`AlignmentResult`'s attitude at ``t[i]`` is the estimate that uses the samples up to and
+including ``t[i]`` and no later one, and is the attitude *at* ``t[i]``; its last entry is at the last
+sample of the input, ``imu.increments()[0][-1]`` (= ``imu.t[-1]``). Rate samples (CSV, NPZ) are
+instantaneous at their ``t``; increments (the simulator, PSINS ``.imu``) cover ``(t - dt, t]``, so an
+increment's information belongs to its end time. A method that steps a loop or filter every few
+samples integrates the samples after its last step with the strapdown, so the result still ends at the
+last sample. :func:`check_time_rule` checks what it can of this (the runner and the command line call
+it on every result); ``tests/test_timing.py`` checks the rest against truth, to one sample.
 """
 
 from __future__ import annotations
@@ -70,9 +81,12 @@ class AlignmentResult:
     method : str
         Method name.
     t : ndarray, shape (M,)
-        Times of the attitude history, s (the last one is the last sample of the data).
+        Times of the attitude history, s, strictly increasing; the last one is the last sample of the
+        data (the module's time rule).
     C_bn : ndarray, shape (R, M, 3, 3)
-        Estimated attitude history (body RFU to ENU) for each of the R recordings.
+        Estimated attitude history (body RFU to ENU) for each of the R recordings: ``C_bn[:, i]`` is the
+        attitude at ``t[i]`` estimated from the samples up to and including ``t[i]`` (for a method that
+        is not causal, a smoother, from the whole record: see :attr:`Aligner.causal`).
     extra : dict
         Method-specific histories or figures (e.g. ``sigma_phi`` (R, M, 3) rad for filters).
     """
@@ -95,7 +109,29 @@ class AlignmentResult:
 
     @property
     def t_end(self) -> float:
+        """Time of the last attitude, s: the last sample of the data."""
         return float(self.t[-1])
+
+
+def check_time_rule(res: AlignmentResult, imu: IMUData, name: str | None = None):
+    """Raise ValueError (one line naming the method) unless ``res`` keeps the time rule on ``imu``.
+
+    Checked: one attitude per recording, finite rotation matrices, strictly increasing times inside the
+    data's span, and the last time at the last sample (to a millionth of a sample interval).
+    """
+    who = f"method {name or res.method!r}"
+    t_last = float(imu.increments()[0][-1])
+    if res.C_bn.shape[0] != imu.runs:
+        raise ValueError(f"{who}: expected an attitude history per recording ({imu.runs}), found {res.C_bn.shape[0]}")
+    if res.t.size == 0 or not np.all(np.isfinite(res.t)) or np.any(np.diff(res.t) <= 0):
+        raise ValueError(f"{who}: expected strictly increasing finite history times, found {res.t[:5]}...")
+    if abs(res.t[-1] - t_last) > 1e-6 * imu.dt:
+        raise ValueError(f"{who}: broke the time rule: its last attitude is at {res.t[-1]:.6f} s, the last sample "
+                         f"at {t_last:.6f} s")
+    if res.t[0] < imu.t0 - 1e-6 * imu.dt:
+        raise ValueError(f"{who}: history starts at {res.t[0]:.6f} s, before the data ({imu.t0:.6f} s)")
+    if not np.all(np.isfinite(res.C_bn)):
+        raise ValueError(f"{who}: returned a non-finite attitude")
 
 
 @runtime_checkable

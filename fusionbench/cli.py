@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, attitude, scenarios
-from .aligner import Site, available_methods, load_method
+from .aligner import Site, available_methods, check_time_rule, load_method
 
 
 def _parser():
@@ -70,6 +70,7 @@ def _cmd_align(args):
         raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
                            f"it needs at least {method.min_duration_s:g} s")
     res = method.align(imu, site)
+    check_time_rule(res, imu, args.method)
     C = res.C_bn_final[0]
     pitch, roll, yaw = np.degrees(attitude.dcm_to_euler(C))
     out = {"method": method.name, "t_end": res.t_end, "C_bn": C.tolist(), "pitch_deg": float(pitch),

@@ -245,6 +245,11 @@ class CommandLoop:
     ``(j, t, dv)``: step index, time (s) and velocity error (R, 3) m/s against the reference.
     Set :attr:`omega_c` (R, 3) rad/s before the next step; the attitude and velocity are in
     :attr:`sd` (``sd.state.C_bn``, ``sd.state.v_n``) and may be corrected between steps.
+
+    The periods cover ``steps * m`` samples; :meth:`finish` integrates the samples after the last whole
+    period (fewer than ``m``) with the command of the last period, so the loop's attitude reaches the last
+    sample (the time rule of :mod:`fusionbench.aligner`). ``records`` is the number of attitudes a history
+    with one entry per period and one for that tail holds.
     """
 
     def __init__(self, imu, site, C0, period, vref=None):
@@ -256,6 +261,8 @@ class CommandLoop:
         # one contiguous block per control period: (steps, R, m, 3), so no step copies its slice
         self.dth = np.ascontiguousarray(dth[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
         self.dv = np.ascontiguousarray(dv[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
+        self._tail = (dth[:, steps * m:], dv[:, steps * m:])
+        self.records = steps + (self.t.size > steps * m)
         self.vref = None
         if vref is not None:
             vref = np.asarray(vref, dtype=float)
@@ -272,3 +279,17 @@ class CommandLoop:
             if self.vref is not None:  # the reference's samples of the period, averaged (static base)
                 dv = dv - self.vref[j]
             yield j, self.t[(j + 1) * m - 1], dv
+
+    def finish(self):
+        """Integrate the samples after the last whole period with the last command.
+
+        Returns
+        -------
+        float or None
+            The time of the last sample, s, or None when the periods used every sample.
+        """
+        dth, dv = self._tail
+        if dth.shape[1] == 0:
+            return None
+        self.sd.run(dth, dv, omega_cmd=self.omega_c, record_every=dth.shape[1])
+        return float(self.t[-1])

@@ -20,6 +20,7 @@ from tqdm import tqdm
 
 from . import imu as imu_mod
 from . import metrics, units
+from .aligner import check_time_rule
 from .io import atomic_open
 
 #: Longest history kept per method for figures (points).
@@ -96,6 +97,7 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
         t0 = time.perf_counter()
         res = method.align(data, scn.site, vref=vref, init=init)
         wall = time.perf_counter() - t0
+        check_time_rule(res, data, name)
         phi = metrics.misalignment_history(res.C_bn, traj.truth(res.t).C_bn)
         idx = _decimate(res.t)
         t_h, phi_h = res.t[idx], phi[:, idx]
