@@ -21,16 +21,19 @@ Specs are SI. Customary units go through :mod:`fusionbench.units`, e.g.
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from scipy.signal import lfilter
 
-from . import units
+from . import fields, units
 from .imudata import IMUData
 
 __all__ = ["SensorErrors", "IMUSpec", "NoiseSchedule", "VelocityReferenceSpec", "IMUData",
-           "PRESETS", "simulate", "simulate_chunks", "simulate_vref", "run_seed_sequence"]
+           "PRESETS", "simulate", "simulate_chunks", "simulate_vref", "run_seed_sequence",
+           "spec_from_table", "schedules_from_list", "load_spec"]
 
 # stream indices inside a run's SeedSequence
 _CONST, _G_WHITE, _A_WHITE, _G_GM, _A_GM, _G_RW, _A_RW, _VREF = range(8)
@@ -183,6 +186,121 @@ PRESETS = {
     "mems": _spec("mems", "MEMS consumer grade: 10 deg/h, 0.3 deg/sqrt(h), 2 mg, 100 ug/sqrt(Hz)",
                   10.0, 0.3, 2000.0, 100.0, 1000.0, 1000.0, instab_dph=5.0, instab_ug=200.0, tau=300.0),
 }
+
+
+#: Keys of an ``[imu]`` table (scenario files, IMU spec files) that override a preset, in customary units:
+#: key -> (sensor, SensorErrors field, unit factor to SI, lowest value allowed)
+SPEC_OVERRIDES = {
+    "gyro_bias_dph": ("gyro", "bias", units.DEG_PER_H, -3600.0),
+    "gyro_bias_sigma_dph": ("gyro", "bias_sigma", units.DEG_PER_H, 0.0),
+    "arw_dpsh": ("gyro", "white", units.DEG_PER_SQRT_H, 0.0),
+    "gyro_scale_ppm": ("gyro", "scale", units.PPM, -1e5),
+    "accel_bias_ug": ("accel", "bias", units.UG, -1e5),
+    "accel_bias_sigma_ug": ("accel", "bias_sigma", units.UG, 0.0),
+    "vrw_ug_rthz": ("accel", "white", units.UG_PER_SQRT_HZ, 0.0),
+    "accel_scale_ppm": ("accel", "scale", units.PPM, -1e5),
+}
+#: Largest magnitude accepted for each override (same units as its key): a gyro bias of 3600 deg/h is
+#: one degree per second, an accelerometer bias of 1e5 ug a tenth of g.
+_OVERRIDE_MAX = {"gyro_bias_dph": 3600.0, "gyro_bias_sigma_dph": 3600.0, "arw_dpsh": 100.0, "gyro_scale_ppm": 1e5,
+                 "accel_bias_ug": 1e5, "accel_bias_sigma_ug": 1e5, "vrw_ug_rthz": 1e5, "accel_scale_ppm": 1e5}
+#: Keys of an ``[imu]`` table.
+SPEC_KEYS = ("preset", "random", "schedule", "name", "description", *SPEC_OVERRIDES)
+_SENSORS = ("gyro", "accel")
+
+
+def schedules_from_list(items, src, key):
+    """Noise schedules from a TOML list of ``{start_s, end_s, factor [, sensors]}`` tables (``key`` names it)."""
+    if not isinstance(items, list):
+        raise fields.FieldError(f"{fields.where(src, key)}: expected a list of tables, found {items!r}")
+    out = []
+    for i, it in enumerate(items):
+        label = f"{key}[{i}]"
+        if not isinstance(it, dict) or set(it) - {"start_s", "end_s", "factor", "sensors"}:
+            raise fields.FieldError(f"{fields.where(src, label)}: expected start_s, end_s, factor [, sensors], found {it!r}")
+        start = fields.number(it, "start_s", src, lo=0, label=f"{label}.start_s")
+        end = fields.number(it, "end_s", src, lo=start, label=f"{label}.end_s")
+        factor = fields.number(it, "factor", src, lo=0, hi=1e8, label=f"{label}.factor")
+        sensors = it.get("sensors", list(_SENSORS))
+        if not isinstance(sensors, list) or not sensors or not all(x in _SENSORS for x in sensors):
+            raise fields.FieldError(f"{fields.where(src, label + '.sensors')}: expected a list of {list(_SENSORS)}, "
+                                    f"found {sensors!r}")
+        out.append(NoiseSchedule(start, end, factor, tuple(sensors)))
+    return tuple(out)
+
+
+def spec_from_table(d, src="<imu>", label="imu"):
+    """An IMUSpec from an ``[imu]`` table of a scenario or IMU spec file.
+
+    Keys: ``preset`` (a key of :data:`PRESETS`, default "navigation"), overrides of the preset in
+    customary units (:data:`SPEC_OVERRIDES`: ``gyro_bias_dph``, ``arw_dpsh`` (deg/sqrt(h)), ``accel_bias_ug``,
+    ``vrw_ug_rthz`` (ug/sqrt(Hz)), ..., each one number or three for the body axes x, y, z), ``random``
+    (false keeps only the deterministic errors), ``schedule`` (noise-PSD factors over time windows),
+    ``name`` and ``description``. ``src`` names the file in error messages, ``label`` the table.
+
+    Raises
+    ------
+    fields.FieldError
+        One line naming the file and the field.
+    """
+    if not isinstance(d, dict):
+        raise fields.FieldError(f"{fields.where(src, label)}: expected a table, found {d!r}")
+    bad = sorted(set(d) - set(SPEC_KEYS))
+    if bad:
+        raise fields.FieldError(f"{fields.where(src, label + '.' + bad[0])}: unknown (expected one of {sorted(SPEC_KEYS)})")
+    preset = fields.string(d, "preset", src, "navigation", PRESETS, label=f"{label}.preset")
+    spec = PRESETS[preset]
+    sensors = {"gyro": spec.gyro, "accel": spec.accel}
+    for key, (sensor, name, factor, lo) in SPEC_OVERRIDES.items():
+        if key in d:
+            values = np.multiply(fields.vector(d, key, src, lo=lo, hi=_OVERRIDE_MAX[key], label=f"{label}.{key}"), factor)
+            sensors[sensor] = replace(sensors[sensor], **{name: values})
+    spec = replace(spec, gyro=sensors["gyro"], accel=sensors["accel"],
+                   schedules=schedules_from_list(d.get("schedule", []), src, f"{label}.schedule"),
+                   name=fields.string(d, "name", src, spec.name, label=f"{label}.name"),
+                   description=fields.string(d, "description", src, spec.description, label=f"{label}.description"))
+    random = d.get("random", True)
+    if not isinstance(random, bool):
+        raise fields.FieldError(f"{fields.where(src, label + '.random')}: expected true or false, found {random!r}")
+    return spec if random else spec.noise_free()
+
+
+def load_spec(source):
+    """An IMU noise model from a preset name, an IMU spec TOML file, or an IMUSpec (returned as it is).
+
+    A TOML file holds an ``[imu]`` table in the scenario format (:func:`spec_from_table`); a scenario file
+    works too (its ``[imu]`` is taken). Without a ``name`` the spec is named after the file.
+
+    Raises
+    ------
+    ValueError
+        One line naming the preset or file and what is wrong.
+    """
+    if isinstance(source, IMUSpec):
+        return source
+    if not isinstance(source, (str, Path)):
+        raise ValueError(f"imu: expected a preset name ({', '.join(PRESETS)}), an IMU spec .toml file or an IMUSpec, "
+                         f"found {type(source).__name__}")
+    if str(source) in PRESETS:
+        return PRESETS[str(source)]
+    path = Path(source)
+    if path.suffix.lower() != ".toml" and not path.exists():
+        raise ValueError(f"imu: expected a preset name ({', '.join(PRESETS)}) or an IMU spec .toml file, found {str(source)!r}")
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such IMU spec file") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: is a directory, expected an IMU spec .toml file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not valid TOML ({' '.join(str(exc).split())})") from None
+    if not isinstance(data.get("imu"), dict):
+        raise fields.FieldError(f"{fields.where(path, 'imu')}: expected an [imu] table (preset and overrides), "
+                                f"found {'none' if 'imu' not in data else repr(data['imu'])}")
+    table = dict(data["imu"])
+    table.setdefault("name", path.stem)
+    return spec_from_table(table, str(path))
 
 
 @dataclass(frozen=True)

@@ -65,13 +65,13 @@ Format (angles in degrees, times in s, sensor figures in the customary units nam
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from .. import attitude, imu, trajectory, units
+from .. import attitude, fields, imu, trajectory
 from ..aligner import Site, load_method
 
 _TOP = {"name", "description", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
@@ -85,8 +85,7 @@ _SECTIONS = {
     "attitude": {"pitch_deg", "roll_deg", "heading_deg", "sway_amplitude_deg", "sway_frequency_hz",
                  "sway_phase_deg"},
     "motion": {"start_s", "segments", "disturbance_rms_mps", "disturbance_band_hz", "disturbance_seed"},
-    "imu": {"preset", "random", "schedule", "gyro_bias_dph", "gyro_bias_sigma_dph", "arw_dpsh", "gyro_scale_ppm",
-            "accel_bias_ug", "accel_bias_sigma_ug", "vrw_ug_rthz", "accel_scale_ppm"},
+    "imu": set(imu.SPEC_KEYS),
     "vref": {"sigma_mps", "schedule"},
     "init": {"misalignment_deg"},
     "metrics": {"settling_band_arcmin", "zoom_from_s", "jump_window_s", "rmse_window_s", "amplitude_windows_s",
@@ -95,21 +94,9 @@ _SECTIONS = {
 }
 
 
-#: [imu] overrides of a preset: key -> (sensor, SensorErrors field, unit factor to SI)
-_OVERRIDES = {
-    "gyro_bias_dph": ("gyro", "bias", units.DEG_PER_H),
-    "gyro_bias_sigma_dph": ("gyro", "bias_sigma", units.DEG_PER_H),
-    "arw_dpsh": ("gyro", "white", units.DEG_PER_SQRT_H),
-    "gyro_scale_ppm": ("gyro", "scale", units.PPM),
-    "accel_bias_ug": ("accel", "bias", units.UG),
-    "accel_bias_sigma_ug": ("accel", "bias_sigma", units.UG),
-    "vrw_ug_rthz": ("accel", "white", units.UG_PER_SQRT_HZ),
-    "accel_scale_ppm": ("accel", "scale", units.PPM),
-}
-
-
-class ScenarioError(ValueError):
-    """A scenario file or field is invalid; the message is one line naming the file and field."""
+#: An invalid scenario file or field: one line naming the file and the field (the FieldError of
+#: :mod:`fusionbench.fields`, which the IMU table's parser raises too).
+ScenarioError = fields.FieldError
 
 
 @dataclass(frozen=True)
@@ -191,65 +178,15 @@ class Scenario:
             raise ScenarioError(f"{_where(self.source, 'variants.' + name)}: {exc}") from None
 
 
-def _where(src, key):
-    return f"{src}: field '{key}'"
-
-
-def _num(d, key, src, default=None, lo=-np.inf, hi=np.inf):
-    if key not in d:
-        if default is None:
-            raise ScenarioError(f"{_where(src, key)} is missing")
-        return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or not lo <= v <= hi:
-        raise ScenarioError(f"{_where(src, key)}: expected a number in [{lo}, {hi}], found {v!r}")
-    return float(v)
-
-
-def _vec(d, key, src, default=(0.0, 0.0, 0.0), n=3):
-    if key not in d:
-        return tuple(default)
-    v = d[key]
-    if isinstance(v, (int, float)) and not isinstance(v, bool):
-        v = [v] * n
-    if not isinstance(v, list) or len(v) != n or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v):
-        raise ScenarioError(f"{_where(src, key)}: expected {n} numbers, found {v!r}")
-    return tuple(float(x) for x in v)
+_where, _num, _vec = fields.where, fields.number, fields.vector
 
 
 def _schedules(items, src, key):
-    if not isinstance(items, list):
-        raise ScenarioError(f"{_where(src, key)}: expected a list of tables, found {items!r}")
-    out = []
-    for i, it in enumerate(items):
-        where = f"{key}[{i}]"
-        if not isinstance(it, dict) or set(it) - {"start_s", "end_s", "factor", "sensors"}:
-            raise ScenarioError(f"{_where(src, where)}: expected start_s, end_s, factor [, sensors], found {it!r}")
-        start = _num(it, "start_s", f"{src} {where}", lo=0)
-        end = _num(it, "end_s", f"{src} {where}", lo=start)
-        factor = _num(it, "factor", f"{src} {where}", lo=0)
-        sensors = tuple(it.get("sensors", ("gyro", "accel")))
-        out.append(imu.NoiseSchedule(start, end, factor, sensors))
-    return tuple(out)
+    return imu.schedules_from_list(items, src, key)
 
 
 def _imu_spec(d, src):
-    preset = d.get("preset", "navigation")
-    if preset not in imu.PRESETS:
-        raise ScenarioError(f"{_where(src, 'imu.preset')}: expected one of {sorted(imu.PRESETS)}, found {preset!r}")
-    spec = imu.PRESETS[preset]
-    sensors = {"gyro": spec.gyro, "accel": spec.accel}
-    for key, (sensor, name, factor) in _OVERRIDES.items():
-        if key in d:
-            values = np.multiply(_vec(d, key, f"{src} [imu]"), factor)
-            sensors[sensor] = replace(sensors[sensor], **{name: values})
-    g, a = sensors["gyro"], sensors["accel"]
-    spec = replace(spec, gyro=g, accel=a, schedules=_schedules(d.get("schedule", []), src, "imu.schedule"))
-    random = d.get("random", True)
-    if not isinstance(random, bool):
-        raise ScenarioError(f"{_where(src, 'imu.random')}: expected true or false, found {random!r}")
-    return spec if random else spec.noise_free()
+    return imu.spec_from_table(d, src)
 
 
 def _window(d, key, src, duration, label=None):
