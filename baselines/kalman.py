@@ -36,7 +36,7 @@ from filterpy.kalman import KalmanFilter
 from fusionbench import earth
 from fusionbench.aligner import AlignmentResult, Site, initial_attitude
 from fusionbench.attitude import rotvec_to_dcm
-from fusionbench.imu import PRESETS, IMUSpec
+from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
 
 from .coarse import InertialCoarseAligner
@@ -84,10 +84,11 @@ class KalmanAligner:
     ----------
     rate_hz : float
         Filter rate, Hz (10).
-    imu : str or IMUSpec
-        Noise model of the filter: a preset name (``fusionbench.imu.PRESETS``) or an IMUSpec. Its
-        white noises give Q; its bias sigmas (fixed part taken as a sigma too) the initial bias
-        covariance, floored so that the prior is never tight (a tight gyro-bias prior biases the tilt).
+    imu : str, path or IMUSpec
+        Noise model of the filter (:func:`fusionbench.imu.load_spec`): a preset name, an IMU spec TOML
+        file or an IMUSpec; default the ``navigation`` preset. Its white noises give Q; its bias sigmas
+        (fixed part taken as a sigma too) the initial bias covariance, floored so that the prior is never
+        tight (a tight gyro-bias prior biases the tilt). The result's ``extra["imu_model"]`` names it.
     vel_sigma : float
         Standard deviation of the reference velocity (each update), m/s.
     att_sigma_deg : (3,) float
@@ -99,15 +100,9 @@ class KalmanAligner:
     name = "kf"
     description = "Kalman fine alignment (filterpy, 11-state psi-angle model, feedback), coarse start"
 
-    def __init__(self, rate_hz=10.0, imu="seed000", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0):
+    def __init__(self, rate_hz=10.0, imu="navigation", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0):
         self.rate_hz = float(rate_hz)
-        if isinstance(imu, str):
-            if imu not in PRESETS:
-                raise ValueError(f"imu: expected a preset name of {sorted(PRESETS)} or an IMUSpec, found {imu!r}")
-            imu = PRESETS[imu]
-        if not isinstance(imu, IMUSpec):
-            raise ValueError(f"imu: expected a preset name or an IMUSpec, found {type(imu).__name__}")
-        self.spec = imu
+        self.spec = load_spec(imu)
         self.vel_sigma = float(vel_sigma)
         self.att_sigma = np.radians(np.broadcast_to(np.asarray(att_sigma_deg, dtype=float), (3,)))
         self.coarse_s = float(coarse_s)
@@ -214,7 +209,8 @@ class KalmanAligner:
         hist_t.append(out_t)
         hist_C.append(out_C)
         hist_s.append(out_s)
-        extra = {"sigma_phi": np.concatenate(hist_s, axis=1), "gyro_bias": eps_hat, "accel_bias": nab_hat}
+        extra = {"sigma_phi": np.concatenate(hist_s, axis=1), "gyro_bias": eps_hat, "accel_bias": nab_hat,
+                 "imu_model": self.spec.name}
         return AlignmentResult(self.name, np.concatenate(hist_t), np.concatenate(hist_C, axis=1), extra)
 
 
@@ -233,8 +229,8 @@ class AdaptiveKalmanAligner(KalmanAligner):
     name = "akf"
     description = "innovation-adaptive Kalman alignment (Sage-Husa R, covariance-matched Q inflation)"
 
-    def __init__(self, b=0.98, window=50, r_floor=0.1, max_inflation=100.0, **kw):
-        super().__init__(**kw)
+    def __init__(self, b=0.98, window=50, r_floor=0.1, max_inflation=100.0, imu="navigation", **kw):
+        super().__init__(imu=imu, **kw)
         self.b, self.window, self.r_floor = float(b), int(window), float(r_floor)
         self.max_inflation = float(max_inflation)
 

@@ -24,6 +24,7 @@ it on every result); ``tests/test_timing.py`` checks the rest against truth, to 
 from __future__ import annotations
 
 import importlib
+import inspect
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from typing import Protocol, runtime_checkable
@@ -168,8 +169,8 @@ def available_methods():
     return {ep.name: ep for ep in entry_points(group=GROUP)}
 
 
-def load_entry(group: str, spec: str, what: str = "method", **options):
-    """Instantiate a class registered by name in the entry-point ``group``, or given as ``module:Class``.
+def entry_class(group: str, spec: str, what: str = "method"):
+    """The class registered by name in the entry-point ``group``, or given as ``module:Class``.
 
     Raises
     ------
@@ -178,30 +179,78 @@ def load_entry(group: str, spec: str, what: str = "method", **options):
     """
     found = {ep.name: ep for ep in entry_points(group=group)}
     if spec in found:
-        cls = found[spec].load()
-    elif ":" in spec:
+        return found[spec].load()
+    if ":" in spec:
         mod, _, attr = spec.partition(":")
         try:
-            cls = getattr(importlib.import_module(mod), attr)
+            return getattr(importlib.import_module(mod), attr)
         except (ImportError, AttributeError) as exc:
             raise ValueError(f"{what} {spec!r}: cannot import ({exc})") from None
-    else:
-        raise ValueError(f"{what} {spec!r}: expected one of {sorted(found)} or a module:Class path")
-    return cls(**options)
+    raise ValueError(f"{what} {spec!r}: expected one of {sorted(found)} or a module:Class path")
 
 
-def load_method(spec: str, **options):
-    """Instantiate an alignment method by registered name or ``module:Class`` path.
+def load_entry(group: str, spec: str, what: str = "method", **options):
+    """Instantiate :func:`entry_class` with ``options``."""
+    return entry_class(group, spec, what)(**options)
+
+
+def uses_noise_model(cls) -> bool:
+    """Whether a method class takes an IMU noise model (its constructor has an ``imu`` option)."""
+    try:
+        return "imu" in inspect.signature(cls).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def load_method(spec: str, imu=None, **options):
+    """Instantiate an alignment method by registered name (named variants included) or ``module:Class`` path.
+
+    Parameters
+    ----------
+    spec : str
+        A name of ``fusionbench list`` or a ``module:Class`` path.
+    imu : str, path or IMUSpec, optional
+        The IMU noise model given to a method that uses one (:func:`uses_noise_model`) unless ``options``
+        name one; ignored by the others.
+    **options
+        Constructor options.
 
     Raises
     ------
     ValueError
         One line naming the method and what is available.
     """
-    obj = load_entry(GROUP, spec, "method", **options)
+    cls = entry_class(GROUP, spec, "method")
+    if imu is not None and "imu" not in options and uses_noise_model(cls):
+        options["imu"] = imu
+    obj = cls(**options)
     if not isinstance(obj, Aligner):
         raise ValueError(f"method {spec!r}: expected an object with name, description, min_duration_s and align()")
     return obj
+
+
+def variant(base, class_name: str, name: str, description: str, **options):
+    """A named variant of the method class ``base``: the same method with other default options.
+
+    The variant is a subclass whose constructor defaults are ``options`` (any of them can still be
+    overridden); ``variant_of`` and ``variant_options`` say what it is, so ``fusionbench list`` can show
+    it. Assign it to the module attribute ``class_name`` of ``base``'s module (so it pickles to workers)
+    and register it in the ``fusionbench.methods`` entry-point group under ``name``.
+    """
+    defaults = dict(options)
+
+    def __init__(self, **kw):
+        base.__init__(self, **{**defaults, **kw})
+
+    sig = inspect.signature(base.__init__)  # the base's options, with the variant's defaults
+    __init__.__signature__ = sig.replace(parameters=[
+        p.replace(default=defaults[p.name]) if p.name in defaults else p for p in sig.parameters.values()])
+
+    doc = (f"{description}\n\nNamed variant ``{name}`` of :class:`{base.__name__}` (``{base.name}``) with "
+           + ", ".join(f"``{k}={v!r}``" for k, v in defaults.items()) + "; any option can still be given.")
+    return type(class_name, (base,), {"name": name, "description": description, "variant_of": base.name,
+                                      "variant_options": defaults, "__init__": __init__, "__doc__": doc,
+                                      "__module__": base.__module__, "__qualname__": class_name})
 
 
 def initial_attitude(init, runs):

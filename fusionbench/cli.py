@@ -6,6 +6,7 @@ Bad input ends with one line ``fusionbench: error: ...`` naming the file or fiel
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import sys
 from pathlib import Path
@@ -13,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, attitude, scenarios
-from .aligner import Site, available_methods, check_time_rule, load_method
+from .aligner import Site, available_methods, check_time_rule, load_method, uses_noise_model
+from .imu import load_spec
 
 
 def _parser():
@@ -27,7 +29,10 @@ def _parser():
     a.add_argument("--lat", type=float, required=True, help="latitude, deg")
     a.add_argument("--lon", type=float, default=0.0, help="longitude, deg")
     a.add_argument("--height", type=float, default=0.0, help="height, m")
-    a.add_argument("--method", default="coarse", help="method name or module:Class (default coarse)")
+    a.add_argument("--method", default="coarse", help="method name (see list; named variants included) or "
+                   "module:Class (default coarse)")
+    a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
+                   "(default: the method's own, shown by list)")
     a.add_argument("--json", action="store_true", help="print one JSON object")
     r = sub.add_parser("run", help="Monte Carlo run of a scenario (a built-in name, 'all', or a .toml file)")
     r.add_argument("scenario")
@@ -51,7 +56,8 @@ def _cmd_list(args):
         print(f"  {name:<28} {scenarios.get(name).description}")
     print("methods:")
     for name, ep in sorted(available_methods().items()):
-        print(f"  {name:<28} {getattr(ep.load(), 'description', '')}")
+        cls = ep.load()
+        print(f"  {name:<28} {getattr(cls, 'description', '')}{_method_notes(cls)}")
     from .calibration import available_calibrators
 
     print("calibration methods (platform experiments):")
@@ -60,10 +66,23 @@ def _cmd_list(args):
     return 0
 
 
+def _method_notes(cls):
+    """What ``list`` adds to a method's description: the options of a named variant, its default noise model."""
+    notes = []
+    if getattr(cls, "variant_of", None):
+        opts = ", ".join(f"{k}={v!r}" for k, v in cls.variant_options.items())
+        notes.append(f"variant of {cls.variant_of}: {opts}")
+    if uses_noise_model(cls):
+        default = inspect.signature(cls).parameters["imu"].default
+        notes.append(f"noise model: {getattr(default, 'name', default)} unless --imu")
+    return "".join(f" [{n}]" for n in notes)
+
+
 def _cmd_align(args):
     from .io import IMUFileError, read_imu
 
-    method = load_method(args.method)
+    noise = None if args.imu is None else load_spec(args.imu)
+    method = load_method(args.method, imu=noise)
     site = Site.from_degrees(args.lat, args.lon, args.height)
     imu, _ = read_imu(args.imu_file)
     if imu.duration < method.min_duration_s:
@@ -78,7 +97,8 @@ def _cmd_align(args):
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"method {out['method']}, t_end {out['t_end']:.3f} s")
+        model = res.extra.get("imu_model")
+        print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))
         print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
     return 0
 

@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass, field
+from functools import partial
 from importlib import resources
 from pathlib import Path
 
@@ -164,11 +165,14 @@ class Scenario:
         return load_calibrator(name)
 
     def method(self, name):
-        """Instantiate a method by scenario variant name, registered name or ``module:Class`` path."""
+        """Instantiate a method by scenario variant name, registered name or ``module:Class`` path.
+
+        A method that uses an IMU noise model gets the scenario's IMU spec (the true model) unless the
+        variant names one (``imu = "PRESET"`` or a spec file)."""
         if name in self.variants:
             options = dict(self.variants[name])
-            return self._variant(name, load_method, options.pop("method"), options)
-        return load_method(name)
+            return self._variant(name, partial(load_method, imu=self.imu_spec), options.pop("method"), options)
+        return load_method(name, imu=self.imu_spec)
 
     def _variant(self, name, loader, spec, options):
         """A variant's method; an option its class refuses is reported against the scenario's table."""
