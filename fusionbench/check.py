@@ -3,7 +3,8 @@
 A figure regresses when it is worse than the reference beyond the tolerance (improvements pass):
 
 * final error per axis, ``rms`` and ``|mean|``: new > ref * (1 + REL_TOL) + ABS_TOL_ARCMIN;
-* azimuth settling time, mean: new > ref * (1 + REL_TOL) + ABS_TOL_S;
+* azimuth settling time (against the truth: the limit's band), mean: new > ref * (1 + REL_TOL) + ABS_TOL_S;
+* the fraction of runs that end inside that band (``settled_fraction_U``): new < ref - ABS_TOL_FRACTION;
 * level RMSE in the scenario's window (``window_rmse_arcmin``), where the reference has it: as the final error;
 * ``reduction_percent`` of a scenario comparing two methods: new < ref - ABS_TOL_PERCENT;
 * platform calibration (``groups`` in the reference): a group's largest |mean error| new > ref * (1 + REL_TOL)
@@ -25,6 +26,7 @@ REL_TOL = 0.10
 ABS_TOL_ARCMIN = 0.05
 ABS_TOL_S = 5.0
 ABS_TOL_PERCENT = 5.0
+ABS_TOL_FRACTION = 0.1
 
 
 def compare(new: dict, ref: dict):
@@ -47,6 +49,10 @@ def compare(new: dict, ref: dict):
         allowed = rv * (1 + REL_TOL) + ABS_TOL_S
         if not nv <= allowed:
             bad.append((name, "settling U mean (s)", rv, nv, allowed))
+        if "settled_fraction_U" in r:
+            rv, nv = r["settled_fraction_U"], n.get("settled_fraction_U", float("nan"))
+            if not nv >= rv - ABS_TOL_FRACTION:
+                bad.append((name, "runs settled in the band", rv, nv, rv - ABS_TOL_FRACTION))
         if "window_rmse_arcmin" in r:
             rv = r["window_rmse_arcmin"]["level"]
             nv = n.get("window_rmse_arcmin", {}).get("level", float("nan"))

@@ -50,30 +50,45 @@ def theoretical_limits(gyro_bias_b, accel_bias_b, C_bn, lat, h=0.0):
     )
 
 
-def settling_time(t, x, band):
-    """First time after which ``|x - x[-1]|`` stays inside ``band`` until the end.
+def settling_time(t, x, band, target=0.0):
+    """First time after which ``|x - target|`` stays inside ``band`` until the end.
+
+    Settling is measured against the truth: ``x`` is an error history (estimate minus truth, e.g. phiU
+    in arcmin) and ``target`` the error a method should settle on, the theoretical limit (constant, or
+    a history like ``x`` when the limit moves with the attitude). A method that settles on a wrong
+    value does not settle.
 
     Parameters
     ----------
     t : array_like, shape (M,)
         Times, s.
     x : array_like, shape (..., M)
-        A history (e.g. phiU in arcmin).
+        Error histories, e.g. phiU in arcmin.
     band : float
         Half-width of the band, same units as ``x``.
+    target : float or array_like broadcastable to ``x``
+        Where the error should settle (the limit), same units as ``x``.
 
     Returns
     -------
     ndarray, shape (...)
-        Settling time, s (``t[0]`` if always inside).
+        Settling time, s: ``t[0]`` if always inside; ``t[-1]`` for a history that ends outside the band
+        (not settled: :func:`settled` tells these apart).
     """
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
-    outside = np.abs(x - x[..., -1:]) > band
+    outside = np.abs(x - target) > band
     any_out = outside.any(axis=-1)
     last_out = x.shape[-1] - 1 - np.argmax(outside[..., ::-1], axis=-1)
     idx = np.where(any_out, np.minimum(last_out + 1, x.shape[-1] - 1), 0)
     return t[idx]
+
+
+def settled(x, band, target=0.0):
+    """Whether each history ``x`` (..., M) ends inside ``band`` around ``target`` (bool, shape (...))."""
+    x = np.asarray(x, dtype=float)
+    target = np.broadcast_to(np.asarray(target, dtype=float), x.shape)
+    return np.abs(x[..., -1] - target[..., -1]) <= band
 
 
 def stats(x):

@@ -21,6 +21,7 @@ from tqdm import tqdm
 from . import imu as imu_mod
 from . import metrics, units
 from .aligner import check_time_rule
+from .imudata import IMUData
 from .io import atomic_open
 
 #: Longest history kept per method for figures (points).
@@ -98,23 +99,75 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
         res = method.align(data, scn.site, vref=vref, init=init)
         wall = time.perf_counter() - t0
         check_time_rule(res, data, name)
-        phi = metrics.misalignment_history(res.C_bn, traj.truth(res.t).C_bn)
+        truth_C = traj.truth(res.t).C_bn
+        phi = metrics.misalignment_history(res.C_bn, truth_C)
+        limit_u = _limits(scn, truth_C)[:, 2]  # (M,) rad: the limit moves with the attitude on a swaying base
+        band = scn.settling_band_arcmin * units.ARCMIN
+        if getattr(method, "causal", True):
+            settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
+            done = metrics.settled(phi[..., 2], band, limit_u)
+        else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
+            settle, done = _prefix_settling(method, data, vref, init, traj, scn, phi[:, -1, 2], limit_u[-1])
         idx = _decimate(res.t)
         t_h, phi_h = res.t[idx], phi[:, idx]
         last = res.t >= res.t[-1] - LEVEL_WINDOW_S
         level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-        extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1]}
+        extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1],
+                 "settle": settle, "settled": done}
         if scn.jump_window_s is not None:
             a, b = scn.jump_window_s
             parts = {"before": res.t < a, "during": (res.t >= a) & (res.t < b), "after": res.t >= b}
             extra["window_ms"] = {k: np.mean(phi[:, sel] ** 2, axis=1) for k, sel in parts.items() if sel.any()}
             extra["peak"] = np.max(np.abs(phi[:, res.t >= a]), axis=1)
+            after = res.t >= b
+            extra["reconverge"] = metrics.settling_time(res.t[after], phi[:, after, 2], band, limit_u[after]) - b
         extra.update(_window_figures(scn, res.t, phi))
         # what a method reports about itself: scalar figures and (R, M) series kept like the history
         extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.extra.get("series", {}).items()}
         figures = {k: float(v) for k, v in res.extra.get("figures", {}).items()}
         out[name] = (desc, t_h, phi_h, phi[:, -1], wall, extra, figures)
     return out
+
+
+#: Spacing of the record prefixes on which a smoother's settling is measured, s.
+PREFIX_STEP_S = 25.0
+
+
+def _limits(scn, C_bn):
+    """Theoretical limits (..., 3) rad of the scenario's IMU at true attitudes ``C_bn`` (..., 3, 3)."""
+    return metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_bn, scn.site.lat, scn.site.h)
+
+
+def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end):
+    """Settling of a method that is not causal (a smoother), per run: its final azimuth error on the prefixes of
+    the record ending every PREFIX_STEP_S seconds, against the limit at each prefix's end; the first prefix
+    end after which every later one (and the whole record) is inside the band. Prefixes are aligned from the
+    end backwards until every run has left the band (or the shortest prefix the method accepts is reached).
+
+    Returns ``(settle (R,) s, settled (R,) bool)``."""
+    band = scn.settling_band_arcmin * units.ARCMIN
+    t_inc = data.increments()[0]
+    first_out = np.abs(phiu_end - limit_end) > band  # the whole record: not settled at all
+    settle = np.where(first_out, t_inc[-1], np.nan)
+    prev = np.full(data.runs, t_inc[-1])
+    step = max(1, int(round(PREFIX_STEP_S / data.dt)))
+    ends = np.arange(t_inc.size - 1 - step, -1, -step)  # last sample index of each prefix, backwards
+    for k in ends:
+        if not np.isnan(settle).any():
+            break
+        n = k + 1 + (data.kind == "rate")  # samples of the prefix (rates: one more than increments)
+        part = IMUData(data.t[:n], data.gyro[:, :n], data.accel[:, :n], data.kind)
+        if part.duration < getattr(method, "min_duration_s", 0.0):
+            break
+        res = method.align(part, scn.site, vref=None if vref is None else vref[:, :k + 1], init=init)
+        C_true = traj.truth([t_inc[k]]).C_bn
+        err = metrics.misalignment_history(res.C_bn[:, -1:], C_true)[:, 0, 2] - _limits(scn, C_true)[0, 2]
+        out = np.isnan(settle) & (np.abs(err) > band)
+        settle[out] = prev[out]
+        prev[:] = t_inc[k]
+    open_ = np.isnan(settle)  # inside the band on every prefix tried: settled by the shortest one
+    settle[open_] = prev[open_]
+    return settle, ~first_out
 
 
 def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None):
@@ -210,11 +263,11 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
     }
     for name, oc in outcomes.items():
         phi_end = oc.extra["phi_end"] / units.ARCMIN
-        phi_u = oc.phi[..., 2] / units.ARCMIN
-        settle = metrics.settling_time(oc.t, phi_u, band)
+        settle = oc.extra["settle"]
         out["methods"][name] = {
             "final_error_arcmin": {ax: metrics.stats(phi_end[:, i]) for i, ax in enumerate("ENU")},
             "settling_time_s": {"U": metrics.stats(settle), "band_arcmin": band},
+            "settled_fraction_U": float(np.mean(oc.extra["settled"])),
             "wall_s": float(oc.wall_s),
             "final_minus_limit_arcmin": {ax: float(np.mean(phi_end[:, i]) - limits[i] / units.ARCMIN)
                                          for i, ax in enumerate("ENU")},
@@ -236,8 +289,7 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
         entry.update(oc.extra["figures"])
         if scn.jump_window_s is not None:
             a, b = scn.jump_window_s
-            after = oc.t >= b
-            reconv = metrics.settling_time(oc.t[after], phi_u[:, after], band) - b
+            reconv = oc.extra["reconverge"]
             out["methods"][name]["jump"] = {
                 "window_s": [a, b],
                 "rms_arcmin": {k: {ax: float(np.sqrt(ms[:, i].mean()) / units.ARCMIN) for i, ax in enumerate("ENU")}

@@ -27,19 +27,31 @@ def test_limits_rotate_with_heading():
     assert lim[2] == pytest.approx(-1e-7 / (earth.OMEGA_IE * np.cos(0.5)), rel=1e-12)
 
 
-def test_settling_time_of_an_exponential_decay():
+def test_settling_time_of_an_exponential_decay_onto_the_limit():
     t = np.linspace(0, 100, 100001)
-    x = 60.0 * np.exp(-t / 10.0)
-    # |x - x_end| < 1 from t = 10 ln(60 / (1 + x_end))
-    expect = 10 * np.log(60.0 / (1.0 + x[-1]))
-    assert metrics.settling_time(t, x, 1.0) == pytest.approx(expect, abs=2e-3)
-    assert metrics.settling_time(t, np.zeros_like(t), 1.0) == 0.0
+    limit = -2.0
+    x = limit + 60.0 * np.exp(-t / 10.0)
+    # |x - limit| < 1 from t = 10 ln 60
+    assert metrics.settling_time(t, x, 1.0, limit) == pytest.approx(10 * np.log(60.0), abs=2e-3)
+    assert metrics.settling_time(t, np.full_like(t, limit), 1.0, limit) == 0.0
 
 
-def test_settling_time_is_batched():
+def test_settling_is_against_the_truth_not_the_final_value():
+    # a method that settles 5 arcmin off the limit has not settled in a 1-arcmin band, whatever its own
+    # final value says
+    t = np.linspace(0, 100, 1001)
+    x = 5.0 + 60.0 * np.exp(-t / 10.0)
+    assert metrics.settling_time(t, x, 1.0, 0.0) == t[-1]
+    assert not metrics.settled(x, 1.0, 0.0)
+    assert metrics.settled(x, 6.0, 0.0) and metrics.settling_time(t, x, 6.0, 0.0) < 50.0
+
+
+def test_settling_time_is_batched_and_takes_a_moving_limit():
     t = np.arange(5.0)
     x = np.array([[5, 0, 0, 0, 0], [0, 0, 0, 5, 0]], dtype=float)
     assert metrics.settling_time(t, x, 1.0).tolist() == [1.0, 4.0]
+    limit = np.array([0.0, 0.0, 0.0, 5.0, 0.0])  # a limit that moves with the attitude (sway)
+    assert metrics.settling_time(t, x, 1.0, limit).tolist() == [4.0, 0.0]
 
 
 def test_stats_and_window_rms():

@@ -76,6 +76,7 @@ def test_metrics_follow_the_contract_and_the_report_is_written(tmp_path):
     for ax in "ENU":
         assert set(r["final_error_arcmin"][ax]) == {"mean", "std", "rms", "max_abs"}
     assert set(r["settling_time_s"]) == {"U", "band_arcmin"} and "wall_s" in r
+    assert 0.0 <= r["settled_fraction_U"] <= 1.0
     # coarse alignment of a tactical IMU: level errors at the accelerometer-bias limit within noise
     assert abs(r["final_error_arcmin"]["E"]["mean"] - m["limits_arcmin"]["E"]) < 0.5
     assert (folder / "report.md").read_text().count("errors.png") == 1
@@ -197,3 +198,50 @@ def test_window_fields_are_validated(tmp_path):
         p.write_text(base + "[metrics]\n" + text + "\n")
         with pytest.raises(scenarios.ScenarioError, match=field.replace(".", r"\.")):
             scenarios.load(p)
+
+
+class WholeRecordCoarse:
+    """A smoother stand-in: the TRIAD estimate of the whole record, reported at every time of the history."""
+
+    name = "whole-record-coarse"
+    description = "coarse alignment of the whole record at every time (not causal)"
+    min_duration_s = 1.0
+    causal = False
+
+    def align(self, imu, site, vref=None, init=None):
+        from baselines.coarse import CoarseAligner
+        from fusionbench.aligner import AlignmentResult
+
+        res = CoarseAligner(history_points=60).align(imu, site)
+        return AlignmentResult(self.name, res.t, np.repeat(res.C_bn[:, -1:], res.t.size, axis=1))
+
+
+def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(tmp_path):
+    # the whole-record stand-in reports, on each prefix of the record, what the causal coarse alignment
+    # reports at the prefix's end; its own history (constant at its final value) would claim it settled at
+    # once. Measured on prefixes every 25 s, its settling is the causal method's settling read at those times.
+    from baselines.coarse import CoarseAligner
+    from fusionbench import metrics, units
+    from fusionbench.imu import IMUData, simulate
+
+    p = tmp_path / "settle.toml"
+    p.write_text('name = "settle"\nduration_s = 200.0\nrate_hz = 20.0\nruns = 4\nmethods = ["coarse"]\n'
+                 '[site]\nlat_deg = 34.0\n[imu]\npreset = "seed000"\n[metrics]\nsettling_band_arcmin = 15.0\n')
+    scn = scenarios.load(p)
+    smoother = "tests.test_runner:WholeRecordCoarse"
+    out = run_scenario(scn, methods=["coarse", smoother], runs=4, seed=3, progress=False)
+    # the definition, computed directly: the causal method's final error on each prefix, against the limit
+    traj = scn.trajectory()
+    data = simulate(traj, scn.imu_spec, scn.dt, runs=4, seed=3)
+    ends = np.arange(25.0, 200.0 + 1e-9, 25.0)
+    C_true = traj.truth(ends).C_bn
+    prefixes = [IMUData(data.t[:n], data.gyro[:, :n], data.accel[:, :n]) for n in np.rint(ends / scn.dt).astype(int)]
+    err = np.stack([metrics.misalignment_history(CoarseAligner().align(part, scn.site).C_bn[:, -1:], C_true[k:k + 1])
+                    [:, 0, 2] for k, part in enumerate(prefixes)], axis=-1)
+    limit = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_true, scn.site.lat)[:, 2]
+    expect = metrics.settling_time(ends, err, 15.0 * units.ARCMIN, limit)
+    assert expect.max() >= 50.0  # it does take time to settle in a 15-arcmin band
+    assert np.array_equal(out.outcomes[smoother].extra["settle"], expect)
+    assert np.all(out.outcomes[smoother].extra["settled"])
+    # the causal method measured on its own (denser) history settles no earlier than on the 25-s grid
+    assert np.all(out.outcomes["coarse"].extra["settle"] >= expect - 25.0)
