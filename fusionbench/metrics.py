@@ -10,6 +10,10 @@ resolved in ENU, g the local gravity and Omega the earth rate::
     phiE = -nabla_N / g
     phiN =  nabla_E / g
     phiU = -eps_E / (Omega cos L) + tan(L) nabla_E / g
+
+:func:`attainable_bound` gives the rest: the standard deviation about that limit which an optimal
+estimator reaches with the sensors' noise (white noise, random and drifting bias parts) and the
+velocity reference's noise, on a static, swaying or moving base.
 """
 
 from __future__ import annotations
@@ -110,3 +114,231 @@ def rmse_window(t, x, t_from, t_to=None):
     if not np.any(sel):
         raise ValueError(f"window: no sample between {t_from} s and {t_to} s")
     return np.sqrt(np.mean(np.asarray(x)[..., sel] ** 2, axis=-1))
+
+
+# ------------------------------------------------------------------------------ attainable bound
+#: Floor of the per-step velocity-measurement standard deviation, m/s: an exact reference
+#: (``vref_sigma = 0``) is taken as this, far below what any accelerometer's white noise adds to
+#: the velocity over a step (1 ug/sqrt(Hz) gives 3e-6 m/s over 0.1 s).
+VREF_FLOOR = 1e-9
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+
+
+def _expm(A):
+    """exp(A) of a stack of matrices (K, m, m): Taylor series of degree 12 after scaling to norm 1/2, then squaring."""
+    nrm = float(np.max(np.sum(np.abs(A), axis=-2)))
+    s = max(0, int(np.ceil(np.log2(nrm / 0.5)))) if nrm > 0 else 0
+    X = A / 2.0**s
+    eye = np.eye(A.shape[-1])
+    E = eye + X / 12.0
+    for k in range(11, 0, -1):
+        E = eye + (X @ E) / k
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
+def _bound_error(name, expected, found):
+    return ValueError(f"{name}: expected {expected}, found {found}")
+
+
+def _positive(x, name, unit):
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise _bound_error(name, f"a positive number of {unit}", repr(x)) from None
+    if not (np.isfinite(v) and v > 0):
+        raise _bound_error(name, f"a positive number of {unit}", v)
+    return v
+
+
+def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0, vref_dt=0.01, step_s=0.5,
+                     C_bn=None, initial_sigma=(1.0, 1.0, 1.0, 10.0, 10.0)):
+    """Standard deviation of the misalignment an optimal estimator reaches, beyond the theoretical limit.
+
+    Any stationary alignment lands on :func:`theoretical_limits`, the part of the error caused by
+    the fixed (deterministic) biases ``spec.gyro.bias`` and ``spec.accel.bias``. This function gives
+    the rest: the error covariance of the linear alignment error model with the true noise
+    statistics and the fixed biases known, i.e. what the Kalman filter with the exact model (the
+    optimal estimator for it) attains at each time. An aligner's error about the limit cannot have
+    a smaller standard deviation.
+
+    Model (ENU psi-angle, as :mod:`baselines.kalman`), states ``[phiE, phiN, phiU, dvE, dvN]``
+    (rad, m/s) plus, in the body frame and only where the spec has them, a random-bias state per
+    axis with initial std ``bias_sigma`` driven by ``random_walk`` (a per-run constant plus a
+    rate/acceleration random walk) and a first-order Gauss-Markov state (steady std
+    ``instability``, correlation time ``tau``), for the gyro (eps) and the accelerometer (nab)::
+
+        phi' = -[w_in x] phi - C_bn (eps + w_g)
+        dv'  = ([f^n x] phi)[E,N] + (C_bn (nab + w_a))[E,N] - [(2 w_ie + w_en) x]_(2x2) dv
+
+    with ``w_g``, ``w_a`` the white noises (``spec.*.white``: rad/sqrt(s), m/s/sqrt(s), scaled by
+    any ``spec.schedules`` factor). Scale-factor, axis-misalignment and quantisation errors, the
+    vertical channel and position errors are not modelled (nor are they in the Kalman filter).
+
+    The record is cut into ``ceil(duration / step_s)`` equal steps; each step is discretised
+    exactly (Van Loan, :func:`scipy.linalg.expm`) with ``C_bn``, ``f^n`` and the rates averaged
+    over four Gauss-Legendre points of the step (a swaying base: keep the step a fraction of the
+    sway periods). At each step end the horizontal velocity error is measured with noise variance
+    ``vref_sigma^2 vref_dt / step`` per axis, the information of all the reference samples of the
+    step (their average, attributed to the step end: accurate while the velocity error changes
+    little within a step compared with that noise). The covariance is propagated and updated in
+    square-root form (QR of the pre-arrays), which keeps it positive and accurate with a diffuse
+    start and an exact reference.
+
+    Parameters
+    ----------
+    spec : fusionbench.imu.IMUSpec
+        The IMU; its noise parts (white, bias_sigma, random_walk, instability, tau, schedules) are used.
+    duration : float
+        Record length, s.
+    site : fusionbench.aligner.Site, optional
+        Static base at this site (latitude, height). Exactly one of ``site`` and ``trajectory``.
+    trajectory : fusionbench.trajectory.Trajectory, optional
+        Swaying or moving base: its truth gives C_bn(t), f^n(t) = C_bn f^b, the earth and transport
+        rates (ENU) along the path, evaluated over [0, duration] (past its own ``duration`` a
+        profile continues as its definition extends it).
+    vref_sigma : float or (3,) array_like
+        White-noise std of each velocity-reference sample, m/s (ENU; the east and north values
+        are used). 0 means an exact velocity; the per-step measurement std is floored at
+        :data:`VREF_FLOOR` (1e-9 m/s) so that the filter stays well defined.
+    vref_dt : float
+        Interval of the reference samples, s.
+    step_s : float
+        Filter step, s (0.5: fine for a static base and for sway periods of 2 s and more).
+    C_bn : (3, 3) array_like, optional
+        Attitude of the static base with ``site`` (body RFU to ENU; default identity: level,
+        facing north). It matters only through body-frame random biases and anisotropic noise.
+    initial_sigma : (5,) array_like
+        Initial std of ``[phiE, phiN, phiU]`` (rad) and ``[dvE, dvN]`` (m/s). The default, 1 rad
+        and 10 m/s, is diffuse: a few minutes of data carry 1e5 times more information.
+        The bias states start at their prior stds.
+
+    Returns
+    -------
+    t : ndarray, shape (M,)
+        Step end times, s.
+    sigma : ndarray, shape (M, 3)
+        Std of ``[phiE, phiN, phiU]`` about the limit at ``t``, rad (ENU).
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument, what was expected and what was found.
+    """
+    from .imu import IMUSpec, _psd_factor
+
+    if not isinstance(spec, IMUSpec):
+        raise _bound_error("spec", "an IMUSpec", type(spec).__name__)
+    if (site is None) == (trajectory is None):
+        raise _bound_error("site, trajectory", "exactly one of them", "both" if site is not None else "neither")
+    duration = _positive(duration, "duration", "s")
+    step_s = _positive(step_s, "step_s", "s")
+    vref_dt = _positive(vref_dt, "vref_dt", "s")
+    try:
+        vs = np.broadcast_to(np.asarray(vref_sigma, dtype=float), (3,))
+    except (TypeError, ValueError):
+        raise _bound_error("vref_sigma", "a non-negative number of m/s or an ENU 3-vector", repr(vref_sigma)) from None
+    if not (np.all(np.isfinite(vs)) and np.all(vs >= 0)):
+        raise _bound_error("vref_sigma", "non-negative m/s", vs.tolist())
+    try:
+        s0 = np.broadcast_to(np.asarray(initial_sigma, dtype=float), (5,))
+    except (TypeError, ValueError):
+        raise _bound_error("initial_sigma", "5 stds [phiE, phiN, phiU] rad, [dvE, dvN] m/s", repr(initial_sigma)) from None
+    if not (np.all(np.isfinite(s0)) and np.all(s0 > 0)):
+        raise _bound_error("initial_sigma", "positive finite stds", s0.tolist())
+
+    M = max(1, int(np.ceil(duration / step_s - 1e-9)))
+    T = duration / M
+    t_end = T * np.arange(1, M + 1)
+    tq = ((t_end - T / 2)[:, None] + T / 2 * _GL_X[None, :]).ravel()  # 4 points per step
+    w = _GL_W / 2  # weights of the step mean
+
+    # attitude, specific force and rates at the sub-points, shape (M, 4, ...)
+    if site is not None:
+        C = np.eye(3) if C_bn is None else np.asarray(C_bn, dtype=float)
+        if C.shape != (3, 3) or not np.all(np.isfinite(C)):
+            raise _bound_error("C_bn", "a finite 3x3 attitude matrix", f"shape {C.shape}")
+        w_ie = earth.earth_rate_n(site.lat)
+        f_n = -earth.gravity_n(site.lat, site.h)
+        Cq = np.broadcast_to(C, (M, 4, 3, 3))
+        fq = np.broadcast_to(f_n, (M, 4, 3))
+        w_in = np.broadcast_to(w_ie, (M, 4, 3))
+        w_cor = np.broadcast_to(2 * w_ie, (M, 4, 3))
+    else:
+        if C_bn is not None:
+            raise _bound_error("C_bn", "None with a trajectory (its truth gives the attitude)", "a matrix")
+        tr = trajectory.truth(tq)
+        _, f_b = trajectory.kinematics(tq)
+        Cq = tr.C_bn.reshape(M, 4, 3, 3)
+        fq = np.einsum("nij,nj->ni", tr.C_bn, f_b).reshape(M, 4, 3)
+        w_ie = earth.earth_rate_n(tr.lat)
+        w_en = earth.transport_rate_n(tr.v_n, tr.lat, tr.h)
+        w_in = (w_ie + w_en).reshape(M, 4, 3)
+        w_cor = (2 * w_ie + w_en).reshape(M, 4, 3)
+
+    # state layout: phi (0:3), dv (3:5), then the bias blocks the spec has
+    g, a = spec.gyro, spec.accel
+    blocks = []  # (sensor, initial std (3,), process-noise PSD (3,), decay rate 1/s)
+    for sensor, e in (("gyro", g), ("accel", a)):
+        if any(e.bias_sigma) or any(e.random_walk):
+            blocks.append((sensor, np.array(e.bias_sigma), np.square(e.random_walk), 0.0))
+        if any(e.instability):
+            blocks.append((sensor, np.array(e.instability), 2 * np.square(e.instability) / e.tau, 1.0 / e.tau))
+    n = 5 + 3 * len(blocks)
+
+    Cm = np.einsum("q,mqij->mij", w, Cq)
+    F = np.zeros((M, n, n))
+    F[:, 0:3, 0:3] = -attitude.skew(np.einsum("q,mqi->mi", w, w_in))
+    F[:, 3:5, 0:3] = attitude.skew(np.einsum("q,mqi->mi", w, fq))[:, :2]
+    F[:, 3:5, 3:5] = -attitude.skew(np.einsum("q,mqi->mi", w, w_cor))[:, :2, :2]
+    Qc = np.zeros((M, n, n))
+    qg = np.einsum("q,mq->m", w, _psd_factor(tq, spec.schedules, "gyro").reshape(M, 4))
+    qa = np.einsum("q,mq->m", w, _psd_factor(tq, spec.schedules, "accel").reshape(M, 4))
+    Qc[:, 0:3, 0:3] = qg[:, None, None] * np.einsum("q,mqij,j,mqkj->mik", w, Cq, np.square(g.white), Cq)
+    Qc[:, 3:5, 3:5] = qa[:, None, None] * np.einsum("q,mqij,j,mqkj->mik", w, Cq, np.square(a.white), Cq)[:, :2, :2]
+    P0 = np.zeros(n)
+    P0[:5] = np.square(s0)
+    for i, (sensor, sig0, q, decay) in enumerate(blocks):
+        k = 5 + 3 * i
+        if sensor == "gyro":
+            F[:, 0:3, k:k + 3] = -Cm
+        else:
+            F[:, 3:5, k:k + 3] = Cm[:, :2]
+        F[:, k:k + 3, k:k + 3] = -decay * np.eye(3)
+        Qc[:, k:k + 3, k:k + 3] = np.diag(q)
+        P0[k:k + 3] = np.square(sig0)
+
+    if np.all(F == F[0]) and np.all(Qc == Qc[0]):
+        F, Qc = F[:1], Qc[:1]  # static: one discretisation serves every step
+    # Van Loan: expm([[-F, Qc], [0, F^T]] T) = [[., Phi^-1 Qd], [0, Phi^T]]
+    A = np.zeros((F.shape[0], 2 * n, 2 * n))
+    A[:, :n, :n] = -F * T
+    A[:, :n, n:] = Qc * T
+    A[:, n:, n:] = np.swapaxes(F, 1, 2) * T
+    E = _expm(A)
+    Phi = np.swapaxes(E[:, n:, n:], 1, 2)
+    Qd = Phi @ E[:, :n, n:]
+    Qd = 0.5 * (Qd + np.swapaxes(Qd, 1, 2))
+    # Qd = L L^T from the eigen-decomposition of Qd scaled to a unit diagonal (its entries span
+    # many orders of magnitude: rad^2, (m/s)^2, bias units)
+    dq = np.sqrt(np.diagonal(Qd, axis1=1, axis2=2))
+    dq = np.where(dq > 0, dq, 1.0)
+    lam, V = np.linalg.eigh(Qd / (dq[:, :, None] * dq[:, None, :]))
+    L = dq[:, :, None] * V * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]
+    r_sd = np.maximum(vs[:2] * np.sqrt(vref_dt / T), VREF_FLOOR)
+    S = np.diag(np.sqrt(P0))  # P = S S^T
+    pre = np.zeros((n + 2, n + 2))
+    pre[0, 0], pre[1, 1] = r_sd
+    sigma = np.empty((M, 3))
+    for j in range(M):
+        i = min(j, Phi.shape[0] - 1)
+        # time update: P- = Phi P Phi^T + Qd, as R^T R of the QR of [S^T Phi^T; L^T]
+        S = np.linalg.qr(np.vstack([(Phi[i] @ S).T, L[i].T]), mode="r").T
+        # measurement update of dvE, dvN (H S = rows 3, 4 of S): QR of [[R^1/2, 0], [(H S)^T, S^T]]
+        pre[2:, :2] = S[3:5].T
+        pre[2:, 2:] = S.T
+        S = np.linalg.qr(pre, mode="r")[2:, 2:].T
+        sigma[j] = np.sqrt(np.sum(S[:3] ** 2, axis=1))
+    return t_end, sigma
