@@ -1,8 +1,9 @@
-"""Kalman fine alignment (filterpy) and its innovation-adaptive variant.
+"""Kalman fine alignment and its innovation-adaptive variant.
 
 After a coarse alignment (or from the scenario's initial guess), the shared strapdown runs on the
-IMU increments and an error-state filter, one :class:`filterpy.kalman.KalmanFilter` per run, estimates
-at ``rate_hz``::
+IMU increments and an error-state filter per run estimates at ``rate_hz`` (the filters of all runs step
+together in a :class:`baselines.filter_bank.FilterBank`: filterpy's arithmetic on arrays over runs, or
+``engine="filterpy"``, one :class:`filterpy.kalman.KalmanFilter` per run, the reference)::
 
     x = [phiE, phiN, phiU, dvE, dvN, eps_x, eps_y, eps_z, nab_x, nab_y, nab_z]
 
@@ -14,8 +15,7 @@ gyro and accelerometer biases in the body frame, rad/s and m/s^2), with the psi-
 
 the transition and process noise accumulated over the update interval (second-order expansion of
 exp(F T) and of the Van Loan integral), and the measurement z = v_INS - v_ref (ENU, m/s; zero
-velocity on a stationary base). The update is filterpy's Joseph form; z is passed as a column vector
-(filterpy 2 broadcasts a 1-D z silently). After each update the estimate is fed back: the attitude is
+velocity on a stationary base). The update is filterpy's Joseph form. After each update the estimate is fed back: the attitude is
 turned by phi (C <- exp([phi x]) C), the velocity error removed, the biases added to the
 compensation of later increments, and those states reset to zero (their covariance is unchanged).
 
@@ -31,23 +31,17 @@ from __future__ import annotations
 
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, initial_attitude
-from fusionbench.attitude import rotvec_to_dcm
+from fusionbench.aligner import AlignmentResult, Site, Supports, initial_attitude
+from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
 
 from .coarse import InertialCoarseAligner
+from .filter_bank import ENGINES, FilterBank
 
 NX = 11
-
-
-def _skew(v):
-    z = np.zeros(v.shape[:-1])
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
 
 
 def error_model(C_bn, f_n, w_in, w_cor):
@@ -60,11 +54,11 @@ def error_model(C_bn, f_n, w_in, w_cor):
     """
     R = C_bn.shape[0]
     F = np.zeros((R, NX, NX))
-    F[:, 0:3, 0:3] = -_skew(w_in)
+    F[:, 0:3, 0:3] = -skew(w_in)
     F[:, 0:3, 5:8] = -C_bn
-    F[:, 3:5, 0:3] = _skew(f_n)[:, :2]
+    F[:, 3:5, 0:3] = skew(f_n)[:, :2]
     F[:, 3:5, 8:11] = C_bn[:, :2]
-    F[:, 3:5, 3:5] = -_skew(w_cor)[:, :2, :2]
+    F[:, 3:5, 3:5] = -skew(w_cor)[:, :2, :2]
     return F
 
 
@@ -95,12 +89,20 @@ class KalmanAligner:
         Initial misalignment standard deviations [E, N, U] after the initialisation, deg.
     coarse_s : float
         Length of the inertial-frame coarse alignment when no initial guess is given, s.
+    engine : {"numpy", "filterpy"}
+        The filters of all runs on arrays (default), or one filterpy KalmanFilter per run (the reference:
+        the same estimates to rounding, several times slower).
     """
 
     name = "kf"
+    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=89.0)
     description = "Kalman fine alignment (filterpy, 11-state psi-angle model, feedback), coarse start"
 
-    def __init__(self, rate_hz=10.0, imu="navigation", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0):
+    def __init__(self, rate_hz=10.0, imu="navigation", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0,
+                 engine="numpy"):
+        if engine not in ENGINES:
+            raise ValueError(f"engine: expected one of {ENGINES}, found {engine!r}")
+        self.engine = engine
         self.rate_hz = float(rate_hz)
         self.spec = load_spec(imu)
         self.vel_sigma = float(vel_sigma)
@@ -127,17 +129,18 @@ class KalmanAligner:
         nab = np.maximum(nab, 10e-6 * 9.80665)
         return np.concatenate([self.att_sigma, [0.1, 0.1], eps, nab]) ** 2
 
-    def _new_filter(self, P0):
-        kf = KalmanFilter(dim_x=NX, dim_z=2)
-        kf.P = np.diag(P0)
-        kf.H = np.zeros((2, NX))
-        kf.H[0, 3] = kf.H[1, 4] = 1.0
-        kf.R = np.eye(2) * self.vel_sigma**2
-        return kf
+    def _new_bank(self, runs, P0):
+        H = np.zeros((2, NX))
+        H[0, 3] = H[1, 4] = 1.0
+        return FilterBank(runs, P0, H, np.eye(2) * self.vel_sigma**2, self.engine)
 
-    def _update(self, kf, z, k):
-        """One measurement update (overridden by the adaptive variant)."""
-        kf.update(z)
+    def _q_scale(self, bank):
+        """Factor (R,) on Q in the next prediction (1; the adaptive variant inflates it)."""
+        return 1.0
+
+    def _update(self, bank, z, k):
+        """Measurement update k with z (R, 2) (the adaptive variant adapts R and Q first)."""
+        bank.update(z)
 
     # ---------------------------------------------------------------- alignment
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
@@ -166,7 +169,7 @@ class KalmanAligner:
         tail = N - k0 - steps * m  # samples after the last filter step, integrated at the end (time rule)
         qc = self._qc()
         P0 = self._p0()
-        filters = [self._new_filter(P0) for _ in range(R)]
+        bank = self._new_bank(R, P0)
         eps_hat = np.zeros((R, 3))
         nab_hat = np.zeros((R, 3))
         out_t = np.empty(steps + (tail > 0))
@@ -189,13 +192,11 @@ class KalmanAligner:
             Qc[:, 5:, 5:] = np.diag(qc[5:])
             Phi, Qd = discretize(F, Qc, T)
             z = st.v_n[:, :2] - (0.0 if vref is None else vref[:, b - 1, :2])
-            x = np.empty((R, NX))
-            for r, kf in enumerate(filters):
-                kf.predict(F=Phi[r], Q=Qd[r] * getattr(kf, "q_scale", 1.0))
-                self._update(kf, z[r][:, None], j)
-                x[r] = kf.x[:, 0]
-                kf.x[:] = 0.0  # feedback below resets every state
-                out_s[r, j] = np.sqrt(np.diag(kf.P)[:3])
+            bank.predict(Phi, Qd * np.reshape(self._q_scale(bank), (-1, 1, 1)))
+            self._update(bank, z, j)
+            x = bank.x.copy()
+            bank.reset_x()  # feedback below resets every state
+            out_s[:, j] = np.sqrt(np.diagonal(bank.P, axis1=1, axis2=2)[:, :3])
             st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
             st.v_n[:, :2] -= x[:, 3:5]
             eps_hat += x[:, 5:8]
@@ -234,28 +235,36 @@ class AdaptiveKalmanAligner(KalmanAligner):
         self.b, self.window, self.r_floor = float(b), int(window), float(r_floor)
         self.max_inflation = float(max_inflation)
 
-    def _new_filter(self, P0):
-        kf = super()._new_filter(P0)
-        kf.innov = []
-        kf.R0 = kf.R.copy()
-        kf.q_scale = 1.0
-        return kf
+    def _new_bank(self, runs, P0):
+        bank = super()._new_bank(runs, P0)
+        bank.R0 = bank.R.copy()
+        bank.innov = np.zeros((runs, self.window, 2, 2))  # the last `window` innovation products, a ring
+        bank.count = 0
+        bank.q_scale = np.ones(runs)
+        return bank
 
-    def _update(self, kf, z, k):
-        HPH = kf.H @ kf.P @ kf.H.T
-        nu = z - kf.H @ kf.x
-        kf.innov.append(nu @ nu.T)
-        if len(kf.innov) > self.window:
-            kf.innov.pop(0)
+    def _q_scale(self, bank):
+        return bank.q_scale
+
+    def _update(self, bank, z, k):
+        H = bank.H
+        HPH = H @ bank.P @ H.T
+        nu = z - bank.x @ H.T  # (R, 2)
+        bank.innov[:, bank.count % self.window] = nu[:, :, None] * nu[:, None, :]
+        bank.count += 1
         # Sage-Husa R, per channel (a diagonal R stays positive definite once floored), floored at a
         # fraction of the nominal R
         d = (1 - self.b) / (1 - self.b ** (k + 1))
-        r = (1 - d) * np.diag(kf.R) + d * (nu[:, 0] ** 2 - np.diag(HPH))
-        kf.R = np.diag(np.maximum(r, self.r_floor * np.diag(kf.R0)))
+        diag = lambda A: np.diagonal(A, axis1=1, axis2=2)  # noqa: E731
+        r = (1 - d) * diag(bank.R) + d * (nu**2 - diag(HPH))
+        R_new = np.zeros_like(bank.R0)
+        R_new[:, [0, 1], [0, 1]] = np.maximum(r, self.r_floor * diag(bank.R0))
+        bank.R = R_new
         # covariance matching: scale Q (for the next predictions) when the innovations exceed what
         # H P^- H^T + R explain; smoothed and bounded, so that P cannot run away
-        if len(kf.innov) == self.window:
-            C = np.mean(kf.innov, axis=0)
-            lam = float(np.clip(np.trace(C - kf.R) / np.trace(HPH), 1.0, self.max_inflation))
-            kf.q_scale = (1 - 1.0 / self.window) * kf.q_scale + lam / self.window
-        kf.update(z)
+        if bank.count >= self.window:
+            C = bank.innov.mean(axis=1)
+            tr = lambda A: np.trace(A, axis1=1, axis2=2)  # noqa: E731
+            lam = np.clip(tr(C - R_new) / tr(HPH), 1.0, self.max_inflation)
+            bank.q_scale = (1 - 1.0 / self.window) * bank.q_scale + lam / self.window
+        bank.update(z)

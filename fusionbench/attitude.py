@@ -112,11 +112,11 @@ def dcm_to_rotvec(C):
 def skew(v):
     """Cross-product matrix [v x] of ``v``, ``(..., 3)`` -> ``(..., 3, 3)``."""
     v = np.asarray(v, dtype=float)
-    z = np.zeros(v.shape[:-1])
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack(
-        [np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2
-    )
+    K = np.zeros(v.shape + (3,))
+    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
+    return K
 
 
 def misalignment(C_bn_est, C_bn_true):
