@@ -45,7 +45,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
+from fusionbench.imu import load_spec
 from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 
 
@@ -85,12 +86,17 @@ class PIDGyrocompass:
     compass_stages : sequence of (start_s, level_td_s, azimuth_td_s)
         The compass stages: from each start time (s, after the shot) on, the level and compass decay
         times (s). Narrower loops later filter more noise; switching keeps the loop states.
+    imu : str, path or IMUSpec, optional
+        The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
+        rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
     """
 
     name = "pid"
+    supports = Supports(bases=("static", "sway"), max_abs_lat_deg=80.0)
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
     def __init__(self, period=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
-                 compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0))):
+                 compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None):
+        self.spec = None if imu is None else load_spec(imu)
         self.period, self.xi = float(period), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
         self.compass_stages = tuple(tuple(float(x) for x in st) for st in compass_stages)
@@ -102,6 +108,7 @@ class PIDGyrocompass:
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
+        check_azimuth_observable(self.spec, site, self.name)
         loop = start_loop(self, imu, site, vref, init, self.period)
         h, R, g = loop.period, loop.R, site.g
         rm, rn = earth.radii(site.lat)

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, initial_attitude
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, initial_attitude
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
@@ -149,6 +149,7 @@ class KalmanAligner:
             raise ValueError(f"latitude: {self.name} needs |latitude| <= 89 deg, found {np.degrees(site.lat):.3f} deg")
         if imu.duration < self.min_duration_s:
             raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
+        check_azimuth_observable(self.spec, site, self.name)
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
         C0 = initial_attitude(init, R)

@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from . import earth
+from . import earth, units
 from .imudata import IMUData
 
 GROUP = "fusionbench.methods"
@@ -135,11 +135,96 @@ def check_time_rule(res: AlignmentResult, imu: IMUData, name: str | None = None)
         raise ValueError(f"{who}: returned a non-finite attitude")
 
 
+#: Largest gyro bias, as a fraction of the horizontal earth rate, with which the azimuth counts as observable:
+#: a bias b turns the gyrocompass's north by up to asin(b / (OMEGA_IE cos L)), 30 deg at this ratio.
+MAX_BIAS_TO_EARTH_RATE = 0.5
+
+
+def azimuth_bias_ratio(spec, lat) -> float:
+    """Gyro bias over the horizontal earth rate: how far the IMU's gyros can turn a gyrocompass's north.
+
+    The bias is the largest axis of ``sqrt(bias^2 + bias_sigma^2 + instability^2)`` (fixed, per-run random
+    and drifting parts: none is known to the aligner), rad/s; the horizontal earth rate is
+    ``OMEGA_IE cos(lat)`` (``lat`` rad). sin of the azimuth error the bias causes is this ratio.
+    """
+    g = spec.gyro
+    b = float(np.max(np.sqrt(np.square(g.bias) + np.square(g.bias_sigma) + np.square(g.instability))))
+    w_h = earth.OMEGA_IE * abs(np.cos(lat))
+    return np.inf if w_h == 0 else b / w_h
+
+
+def check_azimuth_observable(spec, site: Site, name: str):
+    """Raise ValueError (one line) when the IMU's gyro bias hides the earth rate at the site.
+
+    A method given an IMU model refuses rather than returning a confident heading that the bias decides
+    (:data:`MAX_BIAS_TO_EARTH_RATE`; a MEMS gyro of 10 deg/h against 12.5 deg/h of horizontal earth rate at
+    34 deg). ``spec`` None (no model given) is not checked.
+    """
+    if spec is None:
+        return
+    ratio = azimuth_bias_ratio(spec, site.lat)
+    if ratio > MAX_BIAS_TO_EARTH_RATE:
+        g = spec.gyro
+        b = float(np.max(np.sqrt(np.square(g.bias) + np.square(g.bias_sigma) + np.square(g.instability))))
+        w_h = earth.OMEGA_IE * abs(np.cos(site.lat))
+        raise ValueError(f"{name}: the azimuth is unobservable with IMU '{spec.name}': gyro bias {b / units.DEG_PER_H:.3g} "
+                         f"deg/h against a horizontal earth rate of {w_h / units.DEG_PER_H:.3g} deg/h at "
+                         f"{np.degrees(site.lat):.1f} deg latitude (more than {MAX_BIAS_TO_EARTH_RATE:g} of it: the "
+                         f"heading could be {np.degrees(np.arcsin(min(ratio, 1.0))):.0f} deg or more off)")
+
+
+#: Kinds of base a method can claim: stationary, swaying/moored (no translation beyond a disturbance), and
+#: moving (translating, with a velocity reference).
+BASES = ("static", "sway", "moving")
+
+
+@dataclass(frozen=True)
+class Supports:
+    """The conditions a method claims to align under; the conformance matrix runs it on these and only these.
+
+    Parameters
+    ----------
+    bases : tuple of str
+        Kinds of base (:data:`BASES`); "moving" means a translating base with a velocity reference
+        (``vref``). Empty for a method that is not an aligner (a navigator that needs ``init``).
+    max_abs_lat_deg : float
+        Highest |latitude| claimed, deg (gyrocompassing loses the horizontal earth rate toward the poles).
+    """
+
+    bases: tuple = ("static", "sway")
+    max_abs_lat_deg: float = 80.0
+
+    def __post_init__(self):
+        bad = [b for b in self.bases if b not in BASES]
+        if bad:
+            raise ValueError(f"supports bases: expected some of {BASES}, found {bad}")
+        if not 0.0 <= self.max_abs_lat_deg <= 90.0:
+            raise ValueError(f"supports max_abs_lat_deg: expected 0 to 90 deg, found {self.max_abs_lat_deg}")
+
+    def covers(self, base: str, lat_deg: float) -> bool:
+        """Whether the method claims a condition with this base at this latitude (deg)."""
+        return base in self.bases and abs(lat_deg) <= self.max_abs_lat_deg + 1e-9
+
+
+def supports(method) -> Supports:
+    """A method's claims (its ``supports`` attribute; the default :class:`Supports` when it has none)."""
+    return getattr(method, "supports", None) or Supports()
+
+
+def is_causal(method) -> bool:
+    """Whether a method's estimate at t uses only the samples up to t (its ``causal`` attribute, default True)."""
+    return bool(getattr(method, "causal", True))
+
+
 @runtime_checkable
 class Aligner(Protocol):
     """Protocol of an alignment method (structural: no base class needed).
 
-    ``min_duration_s`` is the shortest recording the method accepts, s.
+    ``min_duration_s`` is the shortest recording the method accepts, s. Optional attributes:
+    ``supports`` (a :class:`Supports`: the bases and latitudes it claims; default static and sway up to
+    80 deg), ``causal`` (default True; False for a smoother, whose every estimate uses the whole record:
+    its settling is then measured on growing prefixes) and, for methods that use an IMU noise model, an
+    ``imu`` constructor option (:func:`uses_noise_model`).
     """
 
     name: str

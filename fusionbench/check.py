@@ -11,6 +11,8 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
   (customary units). The information rank is not guarded: on a short scheme the singular values decay
   through the rank tolerance without a gap (``--quick`` of paper002-rolling: the 32nd sits at 1e-12.0),
   so the count is not a stable figure there;
+* a conformance matrix (``cells`` in the reference): a cell that passed must pass, and its azimuth efficiency
+  must not grow beyond ref * (1 + REL_TOL) + ABS_TOL_EFFICIENCY;
 * a method of the reference missing from the run.
 
 Same scenario, seed and size give identical numbers on one machine; the tolerances absorb
@@ -27,6 +29,7 @@ ABS_TOL_ARCMIN = 0.05
 ABS_TOL_S = 5.0
 ABS_TOL_PERCENT = 5.0
 ABS_TOL_FRACTION = 0.1
+ABS_TOL_EFFICIENCY = 0.05
 
 
 def compare(new: dict, ref: dict):
@@ -65,6 +68,16 @@ def compare(new: dict, ref: dict):
             allowed = rv * (1 + REL_TOL)
             if not nv <= allowed:
                 bad.append((name, f"{g} max |mean error| ({rg.get('unit', '')})", rv, nv, allowed))
+    for name, rc in ref.get("cells", {}).items():  # a conformance matrix: every cell that passed still passes
+        for cond, r in rc.items():
+            n = new.get("cells", {}).get(name, {}).get(cond, {"status": "missing"})
+            if r["status"] == "pass" and n["status"] != "pass":
+                bad.append((name, f"{cond}: cell", "pass", n["status"], "pass"))
+            if "efficiency_U" in r:
+                allowed = r["efficiency_U"] * (1 + REL_TOL) + ABS_TOL_EFFICIENCY
+                nv = n.get("efficiency_U", float("nan"))
+                if not nv <= allowed:
+                    bad.append((name, f"{cond}: efficiency", r["efficiency_U"], nv, allowed))
     if "reduction_percent" in ref:
         rv, nv = ref["reduction_percent"], new.get("reduction_percent", float("nan"))
         if not nv >= rv - ABS_TOL_PERCENT:

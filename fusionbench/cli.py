@@ -74,7 +74,8 @@ def _method_notes(cls):
         notes.append(f"variant of {cls.variant_of}: {opts}")
     if uses_noise_model(cls):
         default = inspect.signature(cls).parameters["imu"].default
-        notes.append(f"noise model: {getattr(default, 'name', default)} unless --imu")
+        notes.append("--imu: checks that the azimuth is observable" if default is None else
+                     f"noise model: {getattr(default, 'name', default)} unless --imu")
     return "".join(f" [{n}]" for n in notes)
 
 

@@ -22,12 +22,19 @@ from .io import atomic_open  # noqa: E402
 from .runner import write_metrics  # noqa: E402
 
 
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def save_png(fig, path):
-    """Save a matplotlib figure as PNG atomically and close it."""
+    """Save a matplotlib figure as PNG atomically and close it (mode 0666 less the umask, like any new file)."""
     fd, tmp = tempfile.mkstemp(suffix=".png", dir=os.path.dirname(path) or ".")
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=110)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600: unreadable to a colleague or a web server
         os.replace(tmp, path)
     finally:
         plt.close(fig)
@@ -358,6 +365,10 @@ def write_scenario_report(out, folder):
     """Write metrics.json, report.md and the figures of one run into ``folder``; returns report path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    if getattr(out.scenario, "experiment", None) == "conformance":
+        from .conformance_report import write_report
+
+        return write_report(out, folder)
     if not hasattr(out, "limits"):  # a platform self-calibration experiment
         return _calibration_report(out, folder)
     m = out.metrics

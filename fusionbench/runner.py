@@ -20,7 +20,7 @@ from tqdm import tqdm
 
 from . import imu as imu_mod
 from . import metrics, units
-from .aligner import check_time_rule
+from .aligner import check_time_rule, is_causal
 from .imudata import IMUData
 from .io import atomic_open
 
@@ -52,6 +52,7 @@ class RunOutput:
     metrics: dict
     outcomes: dict
     limits: np.ndarray
+    refused: dict = field(default_factory=dict)
 
 
 def _decimate(t):
@@ -81,12 +82,16 @@ def _window_figures(scn, t, phi):
     return out
 
 
-def _run_batch(scn, method_names, first_run, runs, seed, duration):
-    """Simulate runs first_run..first_run+runs-1 and align them with every method."""
+def _run_batch(scn, method_names, first_run, runs, seed, duration, refusals=False):
+    """Simulate runs first_run..first_run+runs-1 and align them with every method.
+
+    With ``refusals`` a method that refuses the data (ValueError) gets its message instead of an outcome."""
     traj = scn.trajectory(duration)
     data = imu_mod.simulate(traj, scn.imu_spec, scn.dt, runs=runs, seed=seed, first_run=first_run)
     t_inc, _, _ = data.increments()
-    vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
+    vref = None  # a fixed base without a reference's noise: the zero-velocity assumption, as a user's align makes it
+    if not traj.translation.is_static() or any(scn.vref_spec.sigma):
+        vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
     init = scn.initial_guess(traj.truth([data.t0]).C_bn[0])
     out = {}
     for name in method_names:
@@ -96,14 +101,20 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration):
             opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
             desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
         t0 = time.perf_counter()
-        res = method.align(data, scn.site, vref=vref, init=init)
+        try:
+            res = method.align(data, scn.site, vref=vref, init=init)
+        except ValueError as exc:
+            if not refusals:
+                raise
+            out[name] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            continue
         wall = time.perf_counter() - t0
         check_time_rule(res, data, name)
         truth_C = traj.truth(res.t).C_bn
         phi = metrics.misalignment_history(res.C_bn, truth_C)
         limit_u = _limits(scn, truth_C)[:, 2]  # (M,) rad: the limit moves with the attitude on a swaying base
         band = scn.settling_band_arcmin * units.ARCMIN
-        if getattr(method, "causal", True):
+        if is_causal(method):
             settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
             done = metrics.settled(phi[..., 2], band, limit_u)
         else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
@@ -170,7 +181,8 @@ def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end):
     return settle, ~first_out
 
 
-def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None):
+def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None,
+                 refusals=False):
     """Run a scenario's Monte Carlo and compute its metrics.
 
     Parameters
@@ -191,12 +203,19 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         Show a tqdm bar over runs (default: only when stderr is a terminal).
     batch_size : int, optional
         Runs per batch (default: as many as fit in about 200 MB of IMU samples).
+    refusals : bool
+        Record a method that refuses the data (ValueError) in ``RunOutput.refused`` (name: message) and leave it
+        out of the metrics, instead of stopping (the conformance matrix, where refusing can be right).
 
     Returns
     -------
     RunOutput
         Or :class:`fusionbench.calibration.CalibrationOutput` for a platform-rolling scenario.
     """
+    if scn.experiment == "conformance":
+        from .conformance import run_matrix
+
+        return run_matrix(scn, methods, runs, seed, quick, n_jobs, progress)
     if scn.experiment == "platform-rolling":
         from .calibration import run_calibration
 
@@ -224,10 +243,11 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     if n_jobs == 1 or len(jobs) == 1:  # one batch: no worker to start
         results = []
         for k0, n in jobs:
-            results.append(_run_batch(scn, methods, k0, n, seed, duration))
+            results.append(_run_batch(scn, methods, k0, n, seed, duration, refusals))
             bar.update(n)
     else:
-        results = Parallel(n_jobs=n_jobs)(delayed(_run_batch)(scn, methods, k0, n, seed, duration) for k0, n in jobs)
+        results = Parallel(n_jobs=n_jobs)(delayed(_run_batch)(scn, methods, k0, n, seed, duration, refusals)
+                                          for k0, n in jobs)
         bar.update(runs)
     bar.close()
 
@@ -235,9 +255,12 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     C_end = traj.truth([duration]).C_bn[0]
     limits = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_end,
                                         scn.site.lat, scn.site.h)
-    outcomes = {}
+    outcomes, refused = {}, {}
     for name in methods:
         parts = [r[name] for r in results]
+        if any(isinstance(p, str) for p in parts):  # refused on some batch: the first message stands for all
+            refused[name] = next(p for p in parts if isinstance(p, str))
+            continue
         desc, t_h = parts[0][0], parts[0][1]
         phi_h = np.concatenate([p[2] for p in parts])
         phi_end = np.concatenate([p[3] for p in parts])
@@ -247,7 +270,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
             extra[key] = ({k: np.concatenate([p[5][key][k] for p in parts]) for k in val} if isinstance(val, dict)
                           else np.concatenate([p[5][key] for p in parts]))
         outcomes[name] = MethodOutcome(name, desc, t_h, phi_h, sum(p[4] for p in parts), extra)
-    return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits)
+    return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits, refused)
 
 
 def _metrics(scn, outcomes, limits, runs, seed, quick, duration):

@@ -79,7 +79,7 @@ _TOP = {"name", "description", "duration_s", "rate_hz", "runs", "methods", "quic
         "motion", "imu", "vref", "init", "metrics", "variants", "paper", "experiment", "platform"}
 #: Experiment kinds: alignment (the default: IMU data to aligners) and the platform self-calibration of
 #: seed 002 (a ``[platform]`` table, methods from the ``fusionbench.calibrators`` group).
-EXPERIMENTS = ("alignment", "platform-rolling")
+EXPERIMENTS = ("alignment", "platform-rolling", "conformance")
 _SECTIONS = {
     "quick": {"duration_s", "runs"},
     "site": {"lat_deg", "lon_deg", "height_m"},
@@ -324,7 +324,16 @@ def load(path) -> Scenario:
         raise ScenarioError(f"{path}: no such scenario file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML ({exc})") from None
-    return parse(data, str(path))
+    return _parse_any(data, str(path))
+
+
+def _parse_any(data, src):
+    """A scenario, or a conformance matrix (``experiment = "conformance"``: :mod:`fusionbench.conformance`)."""
+    if data.get("experiment") == "conformance":
+        from .. import conformance
+
+        return conformance.parse(data, src)
+    return parse(data, src)
 
 
 def builtin_names():
@@ -336,7 +345,7 @@ def get(name_or_path) -> Scenario:
     """A built-in scenario by name, or a scenario file by path."""
     if name_or_path in builtin_names():
         ref = resources.files(__name__) / f"{name_or_path}.toml"
-        return parse(tomllib.loads(ref.read_text()), f"{name_or_path}.toml")
+        return _parse_any(tomllib.loads(ref.read_text()), f"{name_or_path}.toml")
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
         return load(p)
