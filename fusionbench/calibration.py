@@ -11,7 +11,7 @@ has ``t`` (M,), ``x`` (M, 45) estimates, ``sigma`` (M, 45) and ``final(readout_s
 optionally ``figures`` (scalars it reports about itself, e.g. ``information_rank``) and
 ``report_figures(folder, scheme, lat)``.
 
-metrics.json keeps the CONTRACT's shape: per method ``final_error_arcmin`` is the misalignment of the
+metrics.json keeps the contract's shape (docs/contract.md): per method ``final_error_arcmin`` is the misalignment of the
 estimated platform attitude against truth at the end (E, N, U, arcmin) and ``settling_time_s`` that of
 its azimuth (for a method that reprocesses the data, e.g. the two-pass ``rolling-ekf``, the settling of
 its causal first pass, ``result.first_pass``; ``first_pass`` then also reports that pass's final errors and

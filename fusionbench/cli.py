@@ -1,4 +1,4 @@
-"""Command line: ``fusionbench list / run / align / check`` (see CONTRACT.md).
+"""Command line: ``fusionbench list / run / align / check`` (the contract: docs/contract.md).
 
 Bad input ends with one line ``fusionbench: error: ...`` naming the file or field, exit status 2.
 """

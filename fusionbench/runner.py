@@ -3,7 +3,7 @@
 For a scenario the runner simulates runs in batches (the IMU errors of run k depend only on the
 seed and k, never on the batch: see :mod:`fusionbench.imu`), gives each batch to every method,
 and keeps the misalignment history of each run against truth. The figures of ``metrics.json``
-(CONTRACT) come from these histories; the histories feed the report's figures.
+(docs/contract.md) come from these histories; the histories feed the report's figures.
 """
 
 from __future__ import annotations
