@@ -96,7 +96,7 @@ class KalmanAligner:
 
     name = "kf"
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=89.0)
-    description = "Kalman fine alignment (filterpy, 11-state psi-angle model, feedback), coarse start"
+    description = "Kalman fine alignment (11-state psi-angle model, filterpy arithmetic batched over runs, feedback), coarse start"
 
     def __init__(self, rate_hz=10.0, imu="navigation", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0,
                  engine="numpy"):

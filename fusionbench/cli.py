@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, attitude, scenarios
-from .aligner import Site, available_methods, check_time_rule, load_method, uses_noise_model
+from .aligner import Site, available_methods, check_time_rule, load_method, supports, uses_noise_model
 from .imu import load_spec
 
 
@@ -69,6 +69,9 @@ def _cmd_list(args):
 def _method_notes(cls):
     """What ``list`` adds to a method's description: the options of a named variant, its default noise model."""
     notes = []
+    claims = supports(cls)
+    notes.append(f"claims {', '.join(claims.bases)} up to {claims.max_abs_lat_deg:g} deg" if claims.bases else
+                 "not an aligner: needs an initial attitude")
     if getattr(cls, "variant_of", None):
         opts = ", ".join(f"{k}={v!r}" for k, v in cls.variant_options.items())
         notes.append(f"variant of {cls.variant_of}: {opts}")
