@@ -36,6 +36,29 @@ printed parameters (:data:`PAPER_PARAMETERS`, 100-Hz IMU):
   every run within half an arcminute of the limit. The printed ESO's own tilt estimate z2 / g is no
   better (29 arcmin per m/s: the 50-1/s z1 pole lets the noise into z2).
 
+The level, the default way: estimated, not commanded
+----------------------------------------------------
+* The reported level is the loop's attitude corrected by the ESO's tilt estimate (``level="observer"``):
+  z2 estimates dvN' = g ax + nabN in the north channel and dvE' = -g ay + nabE in the east one, so the
+  computed frame is turned back by [ax, ay, 0] = [z2N / g, -z2E / g, 0] about its own axes, which leaves
+  the limit [-nabN / g, nabE / g] (the paper's section 3.2 reads the level off z2 the same way). The
+  ESO is told the commands (b0 u), so the tilt they impose cancels in the corrected attitude: its
+  error is the ESO's estimation error alone, set by the ESO's bandwidth whatever the NLSEF does.
+  ``level="loop"`` reports the loop's attitude, as the paper.
+* The ESO's linear zone has a triple pole at ``eso_bandwidth`` = 0.13 rad/s (beta01 = 3 w,
+  beta02 = 3 w^2 delta^0.5, beta03 = w^3 delta^0.75), a decade below the sway (1.3-3.1 rad/s at
+  0.2-0.5 Hz). Its extended state z3 carries the steady earth-rate, gyro-bias and coupling terms of
+  the drift, so the estimate has no lag in steady state. The bandwidth trades the reference noise
+  (its share grows as w^1.5) against the gyro's angle random walk (falls as w^-0.5); per channel,
+  1 sigma, from :func:`level_noise`: 0.014 arcmin (seed 000, no reference noise), 0.11 (seed 000 or
+  navigation grade, 0.05 m/s), 0.25-0.27 (tactical grade, 0-0.05 m/s), where a Kalman filter told
+  the noise levels reaches 0.010, 0.026 and 0.13-0.25. No fixed bandwidth serves both ends: 0.5
+  rad/s would give 0.16 on a tactical IMU without reference noise and 0.85 with 0.05 m/s.
+* The NLSEF (h1 = 4 s, c1 = 0.8; the velocity loop at 0.27 and 4.7 1/s with this ESO) keeps the
+  computed frame within about an arcminute of level, which is all the azimuth fit needs.
+* h = 0.1 s: ten 100-Hz samples per step, the reference averaged over them (nothing is lost at these
+  bandwidths), five times fewer Python steps than h = 0.02 s.
+
 Azimuth, beside the levelling:
 
 1. **one-shot**: from ``fit_from_s`` the level channels feed
@@ -159,13 +182,15 @@ def level_noise(method, dt, sigma_v=0.0, arw=0.0, vrw=0.0, g=9.8):
 
 
 class ADRCGyrocompass:
-    """ADRC gyrocompass (method ``adrc``). The defaults are seed 000's printed formulas in h
-    (:data:`PAPER_PARAMETERS` at h = 0.02 s).
+    """ADRC gyrocompass (method ``adrc``): the levels read off the ESO, the azimuth off the commands.
+
+    The defaults are this project's working configuration (see the module docstring);
+    ``ADRCGyrocompass(**PAPER_PARAMETERS)`` is seed 000's printed one.
 
     Parameters
     ----------
     h : float
-        ADRC step, s (0.02). Rounded to a whole number of IMU samples; a recording sampled more slowly
+        ADRC step, s (0.1). Rounded to a whole number of IMU samples; a recording sampled more slowly
         runs the ADRC at its own sample interval, and gains that are unstable at that step (in the
         linear zone, :func:`level_loop_model`) are refused with a ValueError.
     c0, r0, h0 : float, optional
@@ -178,13 +203,13 @@ class ADRCGyrocompass:
     delta : float
         fal's linear zone, m/s (20000: every velocity error lies inside it, so the ESO is linear).
     eso_bandwidth : float or None
-        Triple pole of the ESO's linear zone, rad/s (None): beta01 = 3 w, beta02 = 3 w^2 delta^0.5,
+        Triple pole of the ESO's linear zone, rad/s (0.13): beta01 = 3 w, beta02 = 3 w^2 delta^0.5,
         beta03 = w^3 delta^0.75, whatever the step.
     r1, c1, h1 : float, optional
-        NLSEF bound (default 1/h), damping (0.8) and step (default 10 h), s.
+        NLSEF bound (default 1/h), damping (0.8) and step (4 s; the printed 10 h when None).
     level : {"observer", "loop"}
-        Reported level: the loop's attitude corrected by the ESO's tilt estimate z2 / b0 ("observer"),
-        or the loop's attitude itself ("loop", the paper, default).
+        Reported level: the loop's attitude corrected by the ESO's tilt estimate z2 / b0 ("observer",
+        default), or the loop's attitude itself ("loop", the paper).
     fit_from_s, shot_s : float
         Start of the azimuth fit (the level loops have pulled a large tilt in by then) and time of
         the one-shot azimuth correction, s.
@@ -195,8 +220,8 @@ class ADRCGyrocompass:
     name = "adrc"
     description = "ADRC gyrocompass (seed 000): TD/ESO/NLSEF level loops, azimuth from steady commands (eq. 19)"
 
-    def __init__(self, h=0.02, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
-                 eso_bandwidth=None, r1=None, c1=0.8, h1=None, level="loop", fit_from_s=10.0, shot_s=40.0,
+    def __init__(self, h=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
+                 eso_bandwidth=0.13, r1=None, c1=0.8, h1=4.0, level="observer", fit_from_s=10.0, shot_s=40.0,
                  refine=True):
         self.h = float(h)
         self.c0, self.c1, self.delta = c0, c1, float(delta)
