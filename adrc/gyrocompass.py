@@ -101,7 +101,7 @@ PAPER_PARAMETERS = {
     "h": _H, "c0": 1.0, "r0": 1 / _H**2, "h0": _H,
     "beta01": 1 / _H, "beta02": 1 / (3 * _H**2), "beta03": 1 / (18**2 * _H**3), "delta": 20000.0,
     "r1": 1 / _H, "c1": 0.8, "h1": 10 * _H,
-    "eso_bandwidth": None, "level": "loop", "refine": True,
+    "level": "loop", "refine": True,
 }
 
 
@@ -204,7 +204,8 @@ class ADRCGyrocompass:
         fal's linear zone, m/s (20000: every velocity error lies inside it, so the ESO is linear).
     eso_bandwidth : float or None
         Triple pole of the ESO's linear zone, rad/s (0.13): beta01 = 3 w, beta02 = 3 w^2 delta^0.5,
-        beta03 = w^3 delta^0.75, whatever the step.
+        beta03 = w^3 delta^0.75, whatever the step; for the betas not given. Unused (None) when all
+        three are given.
     r1, c1, h1 : float, optional
         NLSEF bound (default 1/h), damping (0.8) and step (4 s; the printed 10 h when None).
     level : {"observer", "loop"}
@@ -225,7 +226,9 @@ class ADRCGyrocompass:
                  refine=True):
         self.h = float(h)
         self.c0, self.c1, self.delta = c0, c1, float(delta)
-        self.eso_bandwidth = None if eso_bandwidth is None else float(eso_bandwidth)
+        given = (beta01, beta02, beta03)
+        # explicit gains (the printed ones) leave no role to the bandwidth
+        self.eso_bandwidth = None if eso_bandwidth is None or None not in given else float(eso_bandwidth)
         if level not in ("observer", "loop"):
             raise ValueError(f"level: expected 'observer' or 'loop', found {level!r}")
         self.level = level

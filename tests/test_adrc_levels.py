@@ -39,7 +39,9 @@ def test_paper_parameters_are_the_printed_values():
                "beta03": 1 / (18**2 * h**3), "delta": 20000.0, "r1": 1 / h, "c1": 0.8, "h1": 10 * h}
     assert {k: PAPER_PARAMETERS[k] for k in printed} == pytest.approx(printed, rel=1e-15)
     m = ADRCGyrocompass(**PAPER_PARAMETERS)
-    assert m.level == "loop" and m.refine
+    assert m.level == "loop" and m.refine and m.eso_bandwidth is None
+    # every value is a number, a string or a flag, so a scenario's [variants] table can hold the set
+    assert all(isinstance(v, (float, str, bool)) for v in PAPER_PARAMETERS.values())
     assert m.gains(h) == pytest.approx({k: printed[k] for k in m.gains(h)}, rel=1e-15)
 
 
