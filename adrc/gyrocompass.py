@@ -272,16 +272,7 @@ class ADRCGyrocompass:
         az_shot = np.full(R, np.nan)
         az = np.full(R, np.nan)
         every = max(1, int(round(0.1 / h)))  # the azimuth estimate is refreshed at 10 Hz
-
-        def output(C_loop, z2, j):
-            C = C_loop
-            if self.level == "observer":  # remove the ESO's tilt estimate [ax, ay] = [z2N / g, -z2E / g]
-                tilt = z2 / b0
-                C = rodrigues(np.stack([tilt[:, 1], tilt[:, 0], np.zeros(R)], axis=-1)) @ C
-            if j >= shot_step:  # eqs. 17-18 on the reported attitude
-                C = correct_azimuth(C, az if self.refine else az_shot)
-            return C
-
+        tilt = np.zeros((R, loop.records, 2))  # the ESO's tilt estimate z2 / b0 = [ay, ax], rad
         for j, t, dv in loop:
             applied = np.stack([u[:, 1], u[:, 0]], axis=-1)  # [w_cE, w_cN] used during this period
             z1, z2, z3 = eso.update(dv[:, :2], u)
@@ -296,9 +287,15 @@ class ADRCGyrocompass:
                     az_shot = az
             loop.omega_c = np.stack([u[:, 1], u[:, 0], np.zeros(R)], axis=-1)
             hist_t[j] = t
-            hist_C[:, j] = output(loop.sd.state.C_bn, z2, j)
+            hist_C[:, j] = loop.sd.state.C_bn
+            tilt[:, j] = z2 / b0
         t_last = loop.finish()  # the samples after the last ADRC step: the result ends at the last sample
         if t_last is not None:
-            hist_t[-1], hist_az[:, -1] = t_last, hist_az[:, -2]
-            hist_C[:, -1] = output(loop.sd.state.C_bn, eso.z2, loop.steps)
+            hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
+            hist_az[:, -1], tilt[:, -1] = hist_az[:, -2], tilt[:, -2]
+        # the reported attitude at each step, from that step's loop attitude and estimates
+        if self.level == "observer":  # turn the computed frame back by [ax, ay, 0] about its own axes
+            hist_C = rodrigues(np.stack([tilt[..., 1], tilt[..., 0], np.zeros(tilt.shape[:2])], axis=-1)) @ hist_C
+        az_used = hist_az if self.refine else np.broadcast_to(az_shot[:, None], hist_az.shape)
+        hist_C[:, shot_step:] = correct_azimuth(hist_C[:, shot_step:], az_used[:, shot_step:])  # eqs. 17-18
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot, "azimuth_estimate_rad": hist_az})
