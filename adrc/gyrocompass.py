@@ -64,10 +64,10 @@ Checked on 100-Hz simulations, 300 and 600 s (static, 1-2 deg and seed-000 sways
 0.05 m/s of reference noise; from a levelled guess and from [3, 3, 180] deg): seed 000 and navigation
 grade end within 0.35 arcmin of the level limit in every run, with the azimuth 1.0-1.4 times
 ARW / (OMEGA_IE cos L sqrt T) rms about its limit; a tactical IMU ends beyond 0.5 arcmin in 5-22 % of
-the runs (its gyro noise alone puts a Kalman filter there in up to 9 %, and its azimuth error, 9 deg
-rms at 75 deg, turns the 1.5-arcmin tilt of its horizontal bias by as much: 0.2 arcmin rms for any
-method). From 180 deg on paper000
-(0.05 m/s) the azimuth stays within 30 arcmin of its limit after 79 s on average (125 s at most).
+the runs. Its gyro noise alone puts a Kalman filter there in up to 9 %, and its azimuth error (9-13 deg
+rms at 75 deg) turns the 1.5-arcmin tilt of its horizontal bias by as much, 0.2-0.3 arcmin for any
+method. From 180 deg on paper000 (0.05 m/s) the azimuth stays within 30 arcmin of its limit after 79 s
+on average (125 s at most).
 
 Azimuth, beside the levelling:
 
