@@ -54,6 +54,15 @@ def test_td_follows_a_step_and_differentiates_a_ramp():
     assert v2[0] == pytest.approx(0.3, rel=1e-3)
 
 
+def test_td_started_at_rest_on_a_zero_reference_stays_at_zero():
+    # the gyrocompass's level channels track a zero velocity error: their TD would output v1 = v2 = 0
+    # for ever, which is why adrc.gyrocompass does not evaluate it
+    td = TrackingDifferentiator((3, 2), h=0.02, r0=2500.0, h0=0.02)
+    for _ in range(1000):
+        v1, v2 = td.update(0.0)
+    assert not v1.any() and not v2.any()
+
+
 def _linear_eso_error_gain(h, b1, b2, b3, w):
     """|f - z3| / |f| in steady state for f = sin(w t), from the discrete ESO's transfer function.
 
