@@ -94,7 +94,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, variant
+from fusionbench.imu import load_spec
 from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 from fusionbench.strapdown import rodrigues
 
@@ -226,14 +227,20 @@ class ADRCGyrocompass:
         the one-shot azimuth correction, s.
     refine : bool
         Keep refining after the shot (default); False keeps the shot's azimuth.
+    imu : str, path or IMUSpec, optional
+        The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
+        rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
     """
 
     name = "adrc"
-    description = "ADRC gyrocompass (seed 000): TD/ESO/NLSEF level loops, azimuth from steady commands (eq. 19)"
+    description = ("ADRC gyrocompass (seed 000): ESO/NLSEF level loops with the level read off the ESO, azimuth "
+                   "from the steady commands (eq. 19, least squares)")
+    supports = Supports(bases=("static", "sway"), max_abs_lat_deg=80.0)
 
     def __init__(self, h=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  eso_bandwidth=0.13, r1=None, c1=0.8, h1=4.0, level="observer", fit_from_s=10.0, shot_s=40.0,
-                 refine=True):
+                 refine=True, imu=None):
+        self.spec = None if imu is None else load_spec(imu)
         self.h = float(h)
         self.c0, self.c1, self.delta = c0, c1, float(delta)
         given = (beta01, beta02, beta03)
@@ -262,6 +269,7 @@ class ADRCGyrocompass:
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
+        check_azimuth_observable(self.spec, site, self.name)
         loop = start_loop(self, imu, site, vref, init, self.h)
         h, R, g = loop.period, loop.R, site.g
         A, _, _, _ = level_loop_model(self, imu.dt, g)
@@ -309,3 +317,11 @@ class ADRCGyrocompass:
         az_used = hist_az if self.refine else np.broadcast_to(az_shot[:, None], hist_az.shape)
         hist_C[:, shot_step:] = correct_azimuth(hist_C[:, shot_step:], az_used[:, shot_step:])  # eqs. 17-18
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot, "azimuth_estimate_rad": hist_az})
+
+
+#: ``adrc-paper``: seed 000's printed parameters (h = 0.02 s, h1 = 10 h, the ESO of eq. 9 as printed, the level
+#: read off the loop). Under a velocity disturbance its level loop turns the reference noise into tilt (1507 arcmin
+#: per m/s) and the azimuth fails; see the module docstring and the paper000 reproduction note.
+ADRCPaper = variant(ADRCGyrocompass, "ADRCPaper", "adrc-paper",
+                    "ADRC gyrocompass with seed 000's printed parameters (h = 0.02 s, h1 = 10 h, level from the loop)",
+                    **PAPER_PARAMETERS)
