@@ -18,7 +18,7 @@ the first stage of a fine aligner.
 The result carries a history: the estimate from the data up to each of ``history_points`` times.
 
 :class:`InertialCoarseAligner` (``coarse-i0``) fits in the inertial frame instead: robust to sway, in
-motion with a velocity reference.
+motion with a velocity reference, and it refuses a moving base without one (see its docstring).
 """
 
 from __future__ import annotations
@@ -215,21 +215,60 @@ class InertialCoarseAligner:
       observable is the specific force's direction, not the vertical: a gyro bias's azimuth limit
       -epsE / (W cos L) comes with a level error of about fE / fU times it.
 
+    **Moving base without a reference: refused.** Without ``vref`` the data are checked for a
+    stationary or swaying base; ``extra`` reports both figures per recording:
+
+    * ``fit_residual_mps``: the rms residual of the fit once a common scale is allowed
+      (``|V_i0 - s C_b0^i0 V_b0|``; the scale takes the accelerometers' scale and vertical bias errors).
+      On a stationary or moored base it is the base's velocity disturbance (sqrt(3) 0.05 m/s for
+      0.05 m/s rms per axis: 0.087, at most 0.10 over 40 disturbances) plus the gyro errors' share, which
+      grows with the record (a tactical gyro, 1 deg/h and 0.5 deg/h instability: 0.49 m/s over 300 s,
+      1.5 over 600 s; 0.1 or less for navigation grade). A change of velocity during the record adds
+      about a fifth of the change (0.01 g from a quarter, half or three quarters of a 60-s record on:
+      0.28, 0.57, 0.41 m/s; of a 300-s record: 1.5, 2.8, 2.1). Refused above
+      ``motion_mps + motion_mps_per_s2 T^2`` (T the record's length: 0.17 m/s over 60 s, 0.69 over
+      300 s, 2.3 over 600 s), which leaves margins of 1.4 to 1.7 on both sides for gyros up to tactical
+      grade and records up to 600 s; beyond, pass a reference or ``motion_mps=None``.
+    * ``gravity_excess``: ``1 / s - 1``, the mean specific force's excess over normal gravity (in g).
+      A horizontal acceleration a that lasts the whole record is, to first order, a tilt (the
+      equivalence principle: the fit turns the frame by a / g and its residual stays that of a
+      stationary base), but it raises the specific force to sqrt(g^2 + a^2), a^2 / 2g^2 = 4.9e-3 at
+      0.1 g. Refused beyond ``max_gravity_excess`` (3e-3: four times a tactical IMU's bias and scale
+      error; it detects a constant acceleration from about 0.08 g. A constant 0.01 g from the first
+      sample on, 5e-5, cannot be told from a tilt by any method).
+
     Parameters
     ----------
     history_points : int
         Number of times at which the estimate is reported.
     fit_points : int
         Number of fit times (blocks with a reference) in the second half of the record.
+    motion_mps, motion_mps_per_s2 : float
+        Threshold of ``fit_residual_mps`` without a reference: ``motion_mps + motion_mps_per_s2 T^2``
+        (m/s, m/s^3; T the record's length, s). ``motion_mps=None`` disables both checks.
+    max_gravity_excess : float
+        Threshold of ``|gravity_excess|`` without a reference (in g).
+    caller : str, optional
+        Name of the method whose start this is, for the refusal message (``"eso-td"`` gives
+        ``eso-td (coarse-i0 start): ...``).
     """
 
     name = "coarse-i0"
     description = "inertial-frame coarse alignment (gravity turning with the earth), robust to sway; in motion with vref"
     min_duration_s = 10.0
 
-    def __init__(self, history_points: int = 100, fit_points: int = 50):
+    def __init__(self, history_points: int = 100, fit_points: int = 50, motion_mps: float | None = 0.15,
+                 motion_mps_per_s2: float = 6e-6, max_gravity_excess: float = 3e-3, caller: str | None = None):
         self.history_points = int(history_points)
         self.fit_points = int(fit_points)
+        self.motion_mps = None if motion_mps is None else float(motion_mps)
+        self.motion_mps_per_s2 = float(motion_mps_per_s2)
+        self.max_gravity_excess = float(max_gravity_excess)
+        self.caller = caller
+
+    def motion_threshold_mps(self, duration):
+        """Largest ``fit_residual_mps`` (m/s) accepted without a reference on a record of ``duration`` s."""
+        return np.inf if self.motion_mps is None else self.motion_mps + self.motion_mps_per_s2 * float(duration) ** 2
 
     def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align every recording of ``imu``; ``init`` is not used.
@@ -242,8 +281,10 @@ class InertialCoarseAligner:
             Position at the start of the record.
         vref : ndarray, shape (R, M, 3), optional
             Reference velocity over the earth (ENU, m/s) at the increment ends. None: a stationary or
-            swaying base.
+            swaying base, checked (see the class docstring): a ValueError naming the method and the
+            figure when the data show a moving base.
         """
+        who = self.name if self.caller is None else f"{self.caller} (coarse-i0 start)"
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
         if vref is not None:
@@ -295,10 +336,30 @@ class InertialCoarseAligner:
             Vb_blk = V_blk / counts
             V_i0, V_b0 = Vi_blk[:, 1:] - Vi_blk[:, :1], Vb_blk[:, 1:] - Vb_blk[:, :1]
         C_b0_i0 = np.empty((R, 3, 3))
+        resid = np.empty(R)
+        excess = np.empty(R)
         for r in range(R):
             rot, _ = Rotation.align_vectors(V_i0[r], V_b0[r])
             C_b0_i0[r] = rot.as_matrix()
+            a = rot.apply(V_b0[r])
+            s = np.sum(a * V_i0[r]) / np.sum(a * a)  # the common scale (the same rotation is optimal)
+            resid[r] = np.sqrt(np.mean(np.sum((V_i0[r] - s * a) ** 2, axis=-1)))
+            excess[r] = 1.0 / s - 1.0
+        if vref is None and self.motion_mps is not None:
+            T = imu.duration
+            thr = self.motion_threshold_mps(T)
+            r = int(np.argmax(resid))
+            if resid[r] > thr:
+                raise ValueError(f"{who}: the base moves (recording {r}: the inertial-frame fit leaves {resid[r]:.2f} m/s "
+                                 f"rms, a stationary or swaying base less than {thr:.2f} m/s over {T:g} s); a moving "
+                                 f"base needs a velocity reference (vref)")
+            r = int(np.argmax(np.abs(excess)))
+            if abs(excess[r]) > self.max_gravity_excess:
+                raise ValueError(f"{who}: the base accelerates (recording {r}: the specific force differs from gravity "
+                                 f"by {excess[r] * 1e3:+.1f} mg, on a stationary or swaying base by less than "
+                                 f"{self.max_gravity_excess * 1e3:.1f} mg: about {np.sqrt(2 * abs(excess[r])):.2f} g "
+                                 f"of horizontal acceleration); a moving base needs a velocity reference (vref)")
         hist = np.linspace(0, keep.size - 1, self.history_points).round().astype(int)
         hist = np.unique(hist[hist >= fit[0]])
         C_bn = np.swapaxes(C_n_i0[:, hist], -1, -2) @ C_b0_i0[:, None] @ C_keep[:, hist]
-        return AlignmentResult(self.name, t[keep][hist], C_bn)
+        return AlignmentResult(self.name, t[keep][hist], C_bn, {"fit_residual_mps": resid, "gravity_excess": excess})

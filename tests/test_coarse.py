@@ -143,3 +143,73 @@ def test_the_velocity_integral_is_the_integral_of_the_true_specific_force_in_i0(
     simpson = (f_i0[:-2:2] + 4 * f_i0[1:-1:2] + f_i0[2::2]) * dt / 3
     numeric = np.concatenate([[np.zeros(3)], np.cumsum(simpson, axis=0)])
     assert V[0, ::2] == pytest.approx(numeric, abs=2e-5)  # m/s, after 100 s at 2 m/s^2 (200 m/s)
+
+
+# ------------------------------------------------------------------- a moving base without a reference: refused
+def _static_or_swaying(kind, T, spec, heading_deg=30.0, lat_deg=34.0):
+    lat = lat_deg * D
+    mean = (0.5 * D, -1.0 * D, -heading_deg * D)
+    if kind == "moored":  # seed 000's sway (5/7/9 deg) and a 0.05 m/s velocity disturbance
+        tr = tj.moored(lat, mean=mean, disturbance_rms=0.05, duration=T)
+    else:
+        tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=mean), duration=T)
+    from fusionbench.imu import PRESETS
+
+    return tr, simulate(tr, PRESETS[spec], 0.02, runs=2, seed=1)
+
+
+@pytest.mark.parametrize("kind,spec", [("moored", "seed000"), ("moored", "tactical"), ("static", "tactical")])
+def test_stationary_and_swaying_bases_pass_the_motion_check_with_margin(kind, spec):
+    tr, data = _static_or_swaying(kind, 60.0, spec)
+    ic = InertialCoarseAligner()
+    res = ic.align(data, Site(tr.lat))
+    thr = ic.motion_threshold_mps(60.0)
+    assert thr == pytest.approx(0.15 + 6e-6 * 3600)
+    # the disturbance's sqrt(3) x 0.05 = 0.087 m/s (measured 0.086-0.097); still a tactical IMU: 0.02
+    expected = 0.087 if kind == "moored" else 0.03
+    assert res.extra["fit_residual_mps"].max() < 1.2 * expected
+    assert res.extra["fit_residual_mps"].max() < thr / 1.5
+    # the scale and vertical bias errors: seed 000 0.1 mg, tactical 0.7 mg; refused from 3 mg
+    assert np.abs(res.extra["gravity_excess"]).max() < 1e-3
+
+
+@pytest.mark.parametrize("start_frac", [0.25, 0.5])
+def test_an_acceleration_during_the_record_is_refused_naming_the_method_and_the_figure(start_frac):
+    # 0.01 g east from a quarter or half of a 60-s record on: the velocity changes by 4.4 or 2.9 m/s,
+    # which no rotation of the gravity integral explains (measured residual 0.28 and 0.57 m/s, threshold 0.17)
+    T = 60.0
+    tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), accel=0.01 * 9.80665, start=start_frac * T, duration=T)
+    data = simulate(tr, IMUSpec(), 0.02)
+    with pytest.raises(ValueError, match=r"^eso-td \(coarse-i0 start\): the base moves .* m/s rms.*needs a velocity "
+                                         r"reference \(vref\)$"):
+        InertialCoarseAligner(caller="eso-td").align(data, Site(tr.lat))
+    res = InertialCoarseAligner(motion_mps=None).align(data, Site(tr.lat))
+    resid = res.extra["fit_residual_mps"][0]
+    assert resid > 1.5 * InertialCoarseAligner().motion_threshold_mps(T)
+    # with the reference the same data align (and fit: the residual is the IMU's, zero here)
+    vref = simulate_vref(tr, VelocityReferenceSpec(), data.increments()[0])
+    res = InertialCoarseAligner().align(data, Site(tr.lat), vref=vref)
+    assert np.abs(attitude.misalignment(res.C_bn_final[0], tr.truth([T]).C_bn[0])).max() < 0.01 * units.ARCMIN
+
+
+def test_a_constant_acceleration_is_a_tilt_but_at_0_1_g_the_specific_force_shows_it():
+    # from the first sample on, a horizontal acceleration a is a tilt by a / g to first order: the fit's
+    # residual stays that of a stationary base. Its trace is |f| = sqrt(g^2 + a^2), a^2 / 2g^2 = 4.9 mg at
+    # 0.1 g, less the Eotvos effect of the eastward speed a t: the vertical integral loses
+    # int (2 W cosL a t + (a t)^2 / R) = W cosL a t^2 + a^2 t^3 / 3R against g t, weighted by t^2 in the
+    # scale over the fit times (30-60 s): 0.3 mg. At 0.01 g, 0.05 - 0.03 mg: below any sensor error.
+    T = 60.0
+    for a_g, refused in ((0.1, True), (0.01, False)):
+        tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), accel=a_g * 9.80665, duration=T)
+        data = simulate(tr, IMUSpec(), 0.05)
+        res = InertialCoarseAligner(motion_mps=None).align(data, Site(tr.lat))
+        assert res.extra["fit_residual_mps"][0] < 0.05
+        t_fit, acc, g = np.linspace(30.0, 60.0, 31), a_g * 9.80665, earth.gravity(tr.lat)
+        loss = (earth.OMEGA_IE * np.cos(tr.lat) * acc * t_fit + acc**2 * t_fit**2 / (3 * earth.radii(tr.lat)[1])) / g
+        expected = np.sqrt(1 + (acc / g) ** 2) - 1 - np.sum(t_fit**2 * loss) / np.sum(t_fit**2)
+        assert res.extra["gravity_excess"][0] == pytest.approx(expected, abs=0.02e-3)
+        if refused:
+            with pytest.raises(ValueError, match=r"^coarse-i0: the base accelerates .*\+4\.\d mg.*about 0\.10 g.*vref"):
+                InertialCoarseAligner().align(data, Site(tr.lat))
+        else:
+            InertialCoarseAligner().align(data, Site(tr.lat))
