@@ -237,10 +237,16 @@ Velocity reset and attitude feedback (beyond the paper; why)
   azimuth (rms, 8.6 at most over 16 runs), and the default closes on that within 1.1' (noise-free
   seed 001 IMU on the 0.1 g base, from +-4 and +-8 deg).
 
-Without a reference: a stationary or swaying base
--------------------------------------------------
-vref=None means a zero reference. Without an initial attitude the inertial-frame coarse start
-(:class:`baselines.coarse.InertialCoarseAligner`) refuses a base that moves (ValueError naming this method).
+Without a reference: a stationary or swaying base, checked
+---------------------------------------------------------
+vref=None means a zero reference. A base that moves would be read as tilted (a constant horizontal
+acceleration a is a tilt of a / g to first order: the specific force cannot tell) and the heading
+would come out wrong, so it is refused, with a ValueError naming the method and the figure: without an
+initial attitude by the inertial-frame coarse start (:class:`baselines.coarse.InertialCoarseAligner`:
+its fit residual for a velocity change during its 60 s, the specific force's excess over gravity for a
+lasting acceleration), and in any case when the mean specific force over the record exceeds normal
+gravity by more than ``max_gravity_excess`` (3 mg; a^2 / 2 g^2 = 4.9 mg at 0.1 g, less the Eotvos effect
+of an eastward speed; a tactical IMU's bias and scale errors 0.7 mg at most).
 
 The paper's configuration
 -------------------------
@@ -412,6 +418,10 @@ class ESOTDAligner:
     coarse_s : float
         Without an initial attitude, the inertial-frame coarse alignment runs this long first, s (with
         ``vref`` if given; without, it refuses a moving base: :class:`baselines.coarse.InertialCoarseAligner`).
+    max_gravity_excess : float
+        Without a reference, the mean specific force may exceed normal gravity by this much (in g,
+        3e-3) before the base is taken as accelerating and refused (a constant acceleration a raises it
+        by a^2 / 2 g^2: 4.9e-3 at 0.1 g).
 
     Attributes
     ----------
@@ -428,7 +438,7 @@ class ESOTDAligner:
     def __init__(self, T=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
                  beta21=0.1, beta22=0.0025, eso_start="ls", td="ls", td_h1=None, td_r=500.0, td_start_s="auto",
                  td_min_s=10.0, td_memory_s=None, force_h1=5.0, feedback_from_s="auto", feedback_every_s=10.0,
-                 feedback_limit_deg=15.0, coarse_s=60.0):
+                 feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3):
         self.T = float(T)
         if not self.T > 0:
             raise ValueError(f"T: expected a positive step in s, found {T}")
@@ -461,6 +471,7 @@ class ESOTDAligner:
         if self.feedback_every_s <= 0:
             raise ValueError(f"feedback_every_s: expected a positive interval in s, found {feedback_every_s}")
         self.feedback_limit = float(feedback_limit_deg) * np.pi / 180.0
+        self.max_gravity_excess = float(max_gravity_excess)
         # the ESO's floor time: when the expanding-memory gains have fallen to beta (both of them)
         self.eso_floor_s = self._eso_floor_time(self.T) if eso_start == "ls" else 0.0
         if isinstance(td_start_s, str):
@@ -511,7 +522,7 @@ class ESOTDAligner:
             Position at the initial state.
         vref : ndarray, shape (R, M, 3), optional
             Reference velocity (ENU, m/s) at each increment end; zero (a stationary or swaying base) if
-            None.
+            None, in which case a base that accelerates is refused (ValueError naming the figure).
         init : ndarray, shape (R, 3, 3) or (3, 3), optional
             Initial attitude C_bn within a few degrees (the small-angle model; seed 001 starts from
             20', 20', 40'). None: an inertial-frame coarse alignment over the first ``coarse_s`` seconds
@@ -528,13 +539,16 @@ class ESOTDAligner:
         if init is None:  # any heading: inertial-frame coarse alignment first
             from baselines.coarse import InertialCoarseAligner
 
-            coarse = InertialCoarseAligner(history_points=20, caller=self.name)
+            coarse = InertialCoarseAligner(history_points=20, max_gravity_excess=self.max_gravity_excess,
+                                           caller=self.name)
             return coarse_then_fine(imu, site, vref, _WithReference(coarse, vref), self.coarse_s,
                                     lambda rest, vr, C0: self.align(rest, site, vr, C0))
         check_compass_latitude(site.lat, self.name)
         if imu.duration < self.min_duration_s:
             raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, "
                              f"found {imu.duration:g} s")
+        if vref is None:
+            self._check_not_accelerating(dvel, imu.dt, site)
         dt = imu.dt
         C0 = initial_attitude(init, R)
         if vref is None:
@@ -743,6 +757,18 @@ class ESOTDAligner:
             hist_psi[:, -1], hist_fb[:, -1], hist_y[:, -1] = hist_psi[:, -2], hist_fb[:, -2], hist_y[:, -2]
         return AlignmentResult(self.name, hist_t, hist_C, {"psi_hat_rad": hist_psi, "psi_feedback_rad": hist_fb,
                                                            "velocity_error_mps": hist_y})
+
+    def _check_not_accelerating(self, dvel, dt, site):
+        """Without a reference: refuse a record whose mean specific force exceeds gravity (a^2 / 2 g^2 at a
+        constant acceleration a, which the level channels would otherwise read as a tilt of a / g)."""
+        g = earth.gravity(site.lat, site.h)
+        excess = np.linalg.norm(dvel, axis=-1).mean(axis=1) / (dt * g) - 1.0
+        r = int(np.argmax(np.abs(excess)))
+        if abs(excess[r]) > self.max_gravity_excess:
+            raise ValueError(f"{self.name}: the base accelerates (recording {r}: the specific force differs from "
+                             f"gravity by {excess[r] * 1e3:+.1f} mg, on a stationary or swaying base by less than "
+                             f"{self.max_gravity_excess * 1e3:.1f} mg: about {np.sqrt(2 * abs(excess[r])):.2f} g of "
+                             f"horizontal acceleration); a moving base needs a velocity reference (vref)")
 
 
 def _slow_rate(beta1, beta2):

@@ -379,6 +379,27 @@ def test_a_perfect_imu_on_seed_000s_sway_lands_on_the_truth_where_the_printed_td
     assert abs(err[2]) > 0.5 * ARCMIN  # measured 0.96'
 
 
+# ------------------------------------------------------------------- a moving base without a reference: refused
+def test_a_moving_base_without_a_reference_is_refused_naming_the_method_and_the_figure():
+    # seed 001's base (0.1 g east) run as if static: the inertial-frame start sees the specific force exceed
+    # gravity by 4.7 mg (a constant acceleration is otherwise a tilt of a / g), and with an initial attitude
+    # given the mean specific force does, by a^2 / 2 g^2 = 4.9 mg less the Eotvos effect of the eastward
+    # speed (up to 118 m/s: 0.6 mg on average): 4.3 mg
+    tr = tj.accelerating(LAT, duration=120.0)
+    data = simulate(tr, PRESETS["seed001"].noise_free(), 0.1)
+    with pytest.raises(ValueError, match=r"^eso-td \(coarse-i0 start\): the base accelerates .*\+4\.\d mg.*a moving base "
+                                         r"needs a velocity reference \(vref\)$"):
+        ESOTDAligner().align(data, SITE)
+    C0 = tr.truth([data.t0]).C_bn[0]
+    with pytest.raises(ValueError, match=r"^eso-td: the base accelerates .*\+4\.3 mg.*about 0\.09 g.*needs a velocity "
+                                         r"reference \(vref\)$"):
+        ESOTDAligner().align(data, SITE, init=attitude.apply_misalignment(C0, PSI0))
+    # a velocity change during the record shows in the inertial-frame fit's residual (0.01 g from 30 s)
+    tr = tj.accelerating(LAT, accel=0.01 * 9.80665, start=30.0, duration=120.0)
+    with pytest.raises(ValueError, match=r"^eso-td \(coarse-i0 start\): the base moves .* m/s rms"):
+        ESOTDAligner().align(simulate(tr, PRESETS["seed001"].noise_free(), 0.1), SITE)
+
+
 def test_options_that_do_not_apply_are_refused_in_one_line():
     with pytest.raises(ValueError, match=r"^td_h1: expected None with the least-squares TD .*found 50.0: pass td='fst'"):
         ESOTDAligner(td_h1=50.0)
