@@ -6,7 +6,7 @@ import pytest
 from baselines.coarse import CoarseAligner, InertialCoarseAligner, gravity_integral_inertial
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Site
-from fusionbench.imu import IMUSpec, SensorErrors, simulate
+from fusionbench.imu import IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
 from fusionbench.imudata import IMUData
 from tests.conftest import load_fixture
 
@@ -71,3 +71,145 @@ def test_inertial_coarse_alignment_is_exact_on_a_perfect_swaying_base():
     # the analytic method is defeated by the same sway: the mean gyro rate carries the net sway rotation
     bad = attitude.misalignment(CoarseAligner().align(data, Site(lat)).C_bn_final[0], tr.truth([200.0]).C_bn[0])
     assert abs(bad[2]) > 10 * units.ARCMIN
+
+
+# ---------------------------------------------------------------------- coarse-i0 with a velocity reference
+def _accelerating(dt, sigma, runs=1, duration=300.0, seed=0):
+    # seed 001's base: 0.1 g east from rest (294 m/s and 44 km after 300 s), heading 30 deg, tilted body
+    tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), duration=duration)
+    data = simulate(tr, IMUSpec(), dt, runs=runs, seed=seed)
+    vref = simulate_vref(tr, VelocityReferenceSpec((sigma,) * 3), data.increments()[0], runs=runs, seed=seed)
+    return tr, data, vref
+
+
+def test_a_moving_base_with_an_exact_reference_is_aligned_exactly():
+    # 0.1 g for 300 s: the motion terms C_n^i0 v reach 294 m/s and the frame's transport over the earth
+    # 0.4 deg; both enter V_i0 through the reference, so a perfect IMU lands on the truth (measured
+    # 2e-5 arcmin; without the transport rate the error would be of the order of 0.4 deg)
+    tr, data, vref = _accelerating(0.1, 0.0)
+    res = InertialCoarseAligner().align(data, Site(34 * D), vref=vref)
+    err = attitude.misalignment(res.C_bn_final[0], tr.truth([300.0]).C_bn[0])
+    assert np.abs(err).max() < 0.01 * units.ARCMIN
+    assert res.t_end == pytest.approx(300.0)
+
+
+def _block_fit_sigma(V, C_end, sigma, N, blocks=50):
+    """Std (rad, ENU at the end) of the rotation fitted to the block means of V (R=1, N, 3) when the
+    reference carries white noise ``sigma`` (m/s per sample): to first order the fit solves
+    ``dV_k = -[V_k x] delta`` by least squares, with independent noise sigma / sqrt(n_block) per block and
+    the anchor's sigma / sqrt(N / 4) common to all blocks."""
+    edges = np.linspace(N // 2, N, blocks + 1).round().astype(int)
+    V_blk = np.array([V[0, a:b].mean(0) for a, b in zip(edges[:-1], edges[1:])]) - V[0, :N // 4].mean(0)
+    A = np.concatenate([-attitude.skew(v) for v in V_blk])
+    n_blk = (N - N // 2) / blocks
+    S = sigma**2 / n_blk * np.eye(3 * blocks) + sigma**2 / (N // 4) * np.kron(np.ones((blocks, blocks)), np.eye(3))
+    M = np.linalg.solve(A.T @ A, A.T)
+    return np.sqrt(np.diag(C_end.T @ M @ S @ M.T @ C_end))
+
+
+def test_a_noisy_reference_costs_what_the_block_fit_leaves():
+    # 0.1 m/s white noise per 10-Hz sample, averaged over 50 blocks of the second half less the first
+    # quarter's mean. With a constant acceleration the weak axis is the specific force's direction: its
+    # rotation shows only in the earth-rotation curvature g W cosL t^2 / 2 (5-26 m/s over the fit blocks),
+    # 95 % of which a tilt (linear in t) mimics, so sigma = 2.7 arcmin about it and fE / fU = 0.1 of that
+    # in the east level: a twentieth of a degree. Measured rms over 8 runs: 0.24, 0.008, 2.8 arcmin.
+    from baselines.coarse import velocity_integral_inertial
+
+    runs = 8
+    tr, data, vref = _accelerating(0.1, 0.1, runs=runs, seed=3)
+    t = data.increments()[0]
+    V, C = velocity_integral_inertial(t, data.t0, simulate_vref(tr, VelocityReferenceSpec(), t), 34 * D, 0.0)
+    sig = _block_fit_sigma(V, C[0, -1], 0.1, t.size)
+    assert sig / units.ARCMIN == pytest.approx([0.234, 0.0082, 2.71], rel=0.02)
+    res = InertialCoarseAligner().align(data, Site(34 * D), vref=vref)
+    err = attitude.misalignment(res.C_bn_final, tr.truth([300.0]).C_bn[0])
+    assert np.all(np.abs(err) < 4 * sig + 1e-9)
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    assert np.all(rms[[0, 2]] > 0.4 * sig[[0, 2]]) and np.all(rms < 1.6 * sig + 1e-9)
+
+
+def test_the_velocity_integral_is_the_integral_of_the_true_specific_force_in_i0():
+    # V_i0 from the reference (motion terms, Coriolis, turning gravity) against the specific force of the
+    # truth resolved in i0 and integrated numerically (Simpson on a 0.01-s grid)
+    from baselines.coarse import velocity_integral_inertial
+
+    tr = tj.accelerating(-45 * D, mean=(0.0, 0.0, 0.0), accel=2.0, direction=(0.6, 0.8, 0.0), duration=100.0)
+    dt = 0.01
+    t = np.arange(1, 10001) * dt
+    v = tr.velocity(t)[0][None]
+    V, C_n_i0 = velocity_integral_inertial(t, 0.0, v, tr.lat, 0.0)
+    w_ib, f_b = tr.kinematics(t)
+    f_i0 = np.einsum("kij,kjl,kl->ki", C_n_i0[0], tr.truth(t).C_bn, f_b)
+    simpson = (f_i0[:-2:2] + 4 * f_i0[1:-1:2] + f_i0[2::2]) * dt / 3
+    numeric = np.concatenate([[np.zeros(3)], np.cumsum(simpson, axis=0)])
+    assert V[0, ::2] == pytest.approx(numeric, abs=2e-5)  # m/s, after 100 s at 2 m/s^2 (200 m/s)
+
+
+# ------------------------------------------------------------------- a moving base without a reference: refused
+def _static_or_swaying(kind, T, spec, heading_deg=30.0, lat_deg=34.0):
+    lat = lat_deg * D
+    mean = (0.5 * D, -1.0 * D, -heading_deg * D)
+    if kind == "moored":  # seed 000's sway (5/7/9 deg) and a 0.05 m/s velocity disturbance
+        tr = tj.moored(lat, mean=mean, disturbance_rms=0.05, duration=T)
+    else:
+        tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=mean), duration=T)
+    from fusionbench.imu import PRESETS
+
+    return tr, simulate(tr, PRESETS[spec], 0.02, runs=2, seed=1)
+
+
+@pytest.mark.parametrize("kind,spec", [("moored", "seed000"), ("moored", "tactical"), ("static", "tactical")])
+def test_stationary_and_swaying_bases_pass_the_motion_check_with_margin(kind, spec):
+    tr, data = _static_or_swaying(kind, 60.0, spec)
+    ic = InertialCoarseAligner()
+    res = ic.align(data, Site(tr.lat))
+    thr = ic.motion_threshold_mps(60.0)
+    assert thr == pytest.approx(0.15 + 6e-6 * 3600)
+    # the disturbance's sqrt(3) x 0.05 = 0.087 m/s (measured 0.086-0.097); still a tactical IMU: 0.02
+    expected = 0.087 if kind == "moored" else 0.03
+    assert res.extra["fit_residual_mps"].max() < 1.2 * expected
+    assert res.extra["fit_residual_mps"].max() < thr / 1.5
+    # the scale and vertical bias errors: seed 000 0.1 mg, tactical 0.7 mg; refused from 3 mg
+    assert np.abs(res.extra["gravity_excess"]).max() < 1e-3
+
+
+@pytest.mark.parametrize("start_frac", [0.25, 0.5])
+def test_an_acceleration_during_the_record_is_refused_naming_the_method_and_the_figure(start_frac):
+    # 0.01 g east from a quarter or half of a 60-s record on: the velocity changes by 4.4 or 2.9 m/s,
+    # which no rotation of the gravity integral explains (measured residual 0.28 and 0.57 m/s, threshold 0.17)
+    T = 60.0
+    tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), accel=0.01 * 9.80665, start=start_frac * T, duration=T)
+    data = simulate(tr, IMUSpec(), 0.02)
+    with pytest.raises(ValueError, match=r"^eso-td \(coarse-i0 start\): the base moves .* m/s rms.*needs a velocity "
+                                         r"reference \(vref\)$"):
+        InertialCoarseAligner(caller="eso-td").align(data, Site(tr.lat))
+    res = InertialCoarseAligner(motion_mps=None).align(data, Site(tr.lat))
+    resid = res.extra["fit_residual_mps"][0]
+    assert resid > 1.5 * InertialCoarseAligner().motion_threshold_mps(T)
+    # with the reference the same data align (and fit: the residual is the IMU's, zero here)
+    vref = simulate_vref(tr, VelocityReferenceSpec(), data.increments()[0])
+    res = InertialCoarseAligner().align(data, Site(tr.lat), vref=vref)
+    assert np.abs(attitude.misalignment(res.C_bn_final[0], tr.truth([T]).C_bn[0])).max() < 0.01 * units.ARCMIN
+
+
+def test_a_constant_acceleration_is_a_tilt_but_at_0_1_g_the_specific_force_shows_it():
+    # from the first sample on, a horizontal acceleration a is a tilt by a / g to first order: the fit's
+    # residual stays that of a stationary base. Its trace is |f| = sqrt(g^2 + a^2), a^2 / 2g^2 = 4.9 mg at
+    # 0.1 g, less the Eotvos effect of the eastward speed a t: the vertical integral loses
+    # int (2 W cosL a t + (a t)^2 / R) = W cosL a t^2 + a^2 t^3 / 3R against g t, weighted by t^2 in the
+    # scale over the fit times (30-60 s): 0.3 mg. At 0.01 g, 0.05 - 0.03 mg: below any sensor error.
+    T = 60.0
+    for a_g, refused in ((0.1, True), (0.01, False)):
+        tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), accel=a_g * 9.80665, duration=T)
+        data = simulate(tr, IMUSpec(), 0.05)
+        res = InertialCoarseAligner(motion_mps=None).align(data, Site(tr.lat))
+        assert res.extra["fit_residual_mps"][0] < 0.05
+        t_fit, acc, g = np.linspace(30.0, 60.0, 31), a_g * 9.80665, earth.gravity(tr.lat)
+        loss = (earth.OMEGA_IE * np.cos(tr.lat) * acc * t_fit + acc**2 * t_fit**2 / (3 * earth.radii(tr.lat)[1])) / g
+        expected = np.sqrt(1 + (acc / g) ** 2) - 1 - np.sum(t_fit**2 * loss) / np.sum(t_fit**2)
+        assert res.extra["gravity_excess"][0] == pytest.approx(expected, abs=0.02e-3)
+        if refused:
+            with pytest.raises(ValueError, match=r"^coarse-i0: the base accelerates .*\+4\.\d mg.*about 0\.10 g.*vref"):
+                InertialCoarseAligner().align(data, Site(tr.lat))
+        else:
+            InertialCoarseAligner().align(data, Site(tr.lat))
