@@ -270,7 +270,9 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, coarse_then_fine, initial_attitude
+from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, coarse_then_fine,
+                                 initial_attitude, variant)
+from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.compass import check_compass_latitude
 from fusionbench.strapdown import NavState, Strapdown
@@ -432,13 +434,15 @@ class ESOTDAligner:
     """
 
     name = "eso-td"
+    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)
     description = ("ESO/TD alignment (seed 001): 2nd-order ESO per level velocity channel, the azimuth from "
                    "eq. 12's derivative (least-squares TD); moving base with a velocity reference, static or swaying without")
 
     def __init__(self, T=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
                  beta21=0.1, beta22=0.0025, eso_start="ls", td="ls", td_h1=None, td_r=500.0, td_start_s="auto",
                  td_min_s=10.0, td_memory_s=None, force_h1=5.0, feedback_from_s="auto", feedback_every_s=10.0,
-                 feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3):
+                 feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3, imu=None):
+        self.spec = None if imu is None else load_spec(imu)
         self.T = float(T)
         if not self.T > 0:
             raise ValueError(f"T: expected a positive step in s, found {T}")
@@ -528,6 +532,7 @@ class ESOTDAligner:
             20', 20', 40'). None: an inertial-frame coarse alignment over the first ``coarse_s`` seconds
             first (with the reference when there is one; without, it refuses a moving base).
         """
+        check_azimuth_observable(self.spec, site, self.name)
         t, dth, dvel = imu.increments()
         R = imu.runs
         if vref is not None:
@@ -777,3 +782,12 @@ def _slow_rate(beta1, beta2):
     if disc < 0:
         return beta1 / 2.0
     return (beta1 - np.sqrt(disc)) / 2.0
+
+
+
+#: ``eso-td-paper``: seed 001's printed parameters (ESO 0.6 / 0.08 from rest, fst TD with h1 = 5 h, open loop). On a
+#: static base its fixed 0.5-s TD differentiates the earth-rate signal without averaging (5-9 x the bound); with a
+#: 0.1 m/s reference on the moving base it turns the noise into thousands of arcmin (the paper001 note).
+EsoTdPaper = variant(ESOTDAligner, "EsoTdPaper", "eso-td-paper",
+                     "ESO/TD alignment with seed 001's printed parameters (ESO 0.6/0.08, fst TD h1 = 5 h, open loop)",
+                     **PAPER_PARAMETERS)

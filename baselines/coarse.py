@@ -28,7 +28,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
+from fusionbench.imu import load_spec
 from fusionbench.attitude import rotvec_to_dcm
 from fusionbench.imudata import IMUData
 from fusionbench.strapdown import body_increments
@@ -55,17 +56,20 @@ class CoarseAligner:
     """
 
     name = "coarse"
+    supports = Supports(bases=("static",), max_abs_lat_deg=80.0)  # the mean rate carries a sway's net rotation
     description = "analytic coarse alignment (double-vector/TRIAD of mean specific force and earth rate)"
     min_duration_s = 1.0
 
-    def __init__(self, history_points: int = 200):
+    def __init__(self, history_points: int = 200, imu=None):
         self.history_points = int(history_points)
+        self.spec = None if imu is None else load_spec(imu)
 
     def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align every recording of ``imu`` (stationary base); ``vref`` and ``init`` are not used.
 
         Returns an :class:`AlignmentResult` whose last attitude uses the whole recording.
         """
+        check_azimuth_observable(self.spec, site, self.name)
         t, dth, dv = imu.increments()
         m = min(self.history_points, t.size)
         idx = np.unique(np.linspace(0, t.size - 1, m).round().astype(int))
@@ -254,11 +258,17 @@ class InertialCoarseAligner:
     """
 
     name = "coarse-i0"
+    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)
+    #: Not causal: every attitude of the history uses the fit over the second half of the whole record
+    #: (its settling is measured on prefixes; the attitude at the last sample is what a user gets).
+    causal = False
     description = "inertial-frame coarse alignment (gravity turning with the earth), robust to sway; in motion with vref"
     min_duration_s = 10.0
 
     def __init__(self, history_points: int = 100, fit_points: int = 50, motion_mps: float | None = 0.15,
-                 motion_mps_per_s2: float = 6e-6, max_gravity_excess: float = 3e-3, caller: str | None = None):
+                 motion_mps_per_s2: float = 6e-6, max_gravity_excess: float = 3e-3, caller: str | None = None,
+                 imu=None):
+        self.spec = None if imu is None else load_spec(imu)
         self.history_points = int(history_points)
         self.fit_points = int(fit_points)
         self.motion_mps = None if motion_mps is None else float(motion_mps)
@@ -284,6 +294,7 @@ class InertialCoarseAligner:
             swaying base, checked (see the class docstring): a ValueError naming the method and the
             figure when the data show a moving base.
         """
+        check_azimuth_observable(self.spec, site, self.name)
         who = self.name if self.caller is None else f"{self.caller} (coarse-i0 start)"
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape

@@ -157,7 +157,8 @@ class KalmanAligner:
         hist_t, hist_C, hist_s = [], [], []
         if C0 is None:  # coarse alignment on the first coarse_s seconds, then fine alignment from there
             k0 = int(round(self.coarse_s / imu.dt))
-            coarse = InertialCoarseAligner(history_points=20).align(imu.__class__(t[:k0], dth[:, :k0], dv[:, :k0]), site)
+            coarse = InertialCoarseAligner(history_points=20, caller=self.name).align(
+                imu.__class__(t[:k0], dth[:, :k0], dv[:, :k0]), site, vref=None if vref is None else vref[:, :k0])
             C0 = coarse.C_bn_final
             hist_t.append(coarse.t)
             hist_C.append(coarse.C_bn)
