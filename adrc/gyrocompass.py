@@ -325,3 +325,4 @@ class ADRCGyrocompass:
 ADRCPaper = variant(ADRCGyrocompass, "ADRCPaper", "adrc-paper",
                     "ADRC gyrocompass with seed 000's printed parameters (h = 0.02 s, h1 = 10 h, level from the loop)",
                     **PAPER_PARAMETERS)
+ADRCPaper.supports = Supports(bases=())  # the printed parameters claim no condition: they reproduce the paper

@@ -791,3 +791,4 @@ def _slow_rate(beta1, beta2):
 EsoTdPaper = variant(ESOTDAligner, "EsoTdPaper", "eso-td-paper",
                      "ESO/TD alignment with seed 001's printed parameters (ESO 0.6/0.08, fst TD h1 = 5 h, open loop)",
                      **PAPER_PARAMETERS)
+EsoTdPaper.supports = Supports(bases=())  # the printed parameters claim no condition: they reproduce the paper

@@ -46,7 +46,7 @@ import numba
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, initial_attitude
+from fusionbench.aligner import AlignmentResult, Supports, initial_attitude
 from fusionbench.imudata import IMUData
 from fusionbench.strapdown import NavState, Strapdown, integrate_compiled
 
@@ -97,6 +97,7 @@ class DampedNavigator:
     """
 
     name = "damped-nav"
+    supports = Supports(bases=(), needs_init=True)  # a navigator: it needs an initial attitude from an alignment
     description = "free-inertial navigation with seed 004's damping network (undamped, fixed xi = 0.5, or adaptive q)"
     min_duration_s = 10.0
 

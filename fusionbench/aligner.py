@@ -186,13 +186,16 @@ class Supports:
     ----------
     bases : tuple of str
         Kinds of base (:data:`BASES`); "moving" means a translating base with a velocity reference
-        (``vref``). Empty for a method that is not an aligner (a navigator that needs ``init``).
+        (``vref``). Empty: no condition is claimed (a paper's printed parameters, kept to reproduce it).
     max_abs_lat_deg : float
         Highest |latitude| claimed, deg (gyrocompassing loses the horizontal earth rate toward the poles).
+    needs_init : bool
+        The method cannot start on its own: it needs an initial attitude (a navigator, not an aligner).
     """
 
     bases: tuple = ("static", "sway")
     max_abs_lat_deg: float = 80.0
+    needs_init: bool = False
 
     def __post_init__(self):
         bad = [b for b in self.bases if b not in BASES]

@@ -70,8 +70,9 @@ def _method_notes(cls):
     """What ``list`` adds to a method's description: the options of a named variant, its default noise model."""
     notes = []
     claims = supports(cls)
-    notes.append(f"claims {', '.join(claims.bases)} up to {claims.max_abs_lat_deg:g} deg" if claims.bases else
-                 "not an aligner: needs an initial attitude")
+    notes.append("not an aligner: needs an initial attitude" if claims.needs_init else
+                 f"claims {', '.join(claims.bases)} up to {claims.max_abs_lat_deg:g} deg" if claims.bases else
+                 "claims no condition: kept to reproduce its paper")
     if getattr(cls, "variant_of", None):
         opts = ", ".join(f"{k}={v!r}" for k, v in cls.variant_options.items())
         notes.append(f"variant of {cls.variant_of}: {opts}")

@@ -155,13 +155,9 @@ def parse(data, src="<conformance>"):
 
 
 def aligner_names():
-    """Every registered method that claims some base (navigators that need an initial attitude excluded)."""
-    out = []
-    for name, ep in sorted(available_methods().items()):
-        cls = ep.load()
-        if supports(cls).bases:
-            out.append(name)
-    return out
+    """Every registered aligner (navigators that need an initial attitude left out). A method that claims no
+    condition still meets the MEMS condition, where every aligner must refuse."""
+    return [name for name, ep in sorted(available_methods().items()) if not supports(ep.load()).needs_init]
 
 
 def condition_scenario(matrix, cond, quick=False, band_arcmin=None):
