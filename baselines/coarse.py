@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from fusionbench import earth
 from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
 from fusionbench.imu import load_spec
-from fusionbench.attitude import rotvec_to_dcm
+from fusionbench.attitude import orthonormalize, rotvec_to_dcm, skew
 from fusionbench.imudata import IMUData
 from fusionbench.strapdown import body_increments
 
@@ -255,6 +255,14 @@ class InertialCoarseAligner:
     caller : str, optional
         Name of the method whose start this is, for the refusal message (``"eso-td"`` gives
         ``eso-td (coarse-i0 start): ...``).
+    level_window_s : float or None
+        Each attitude's level is taken from the mean specific force of this many seconds before it (20 s;
+        None: the fit's level; see :meth:`_relevel`).
+    level_noise_max : float
+        With a reference, the largest level error (rad, 3e-5: 0.1 arcmin) its slope's noise may cause for the
+        level to be taken that way.
+    imu : str, path or IMUSpec, optional
+        The IMU, used only to refuse when its gyro bias hides the earth rate; None: not checked.
     """
 
     name = "coarse-i0"
@@ -267,8 +275,10 @@ class InertialCoarseAligner:
 
     def __init__(self, history_points: int = 100, fit_points: int = 50, motion_mps: float | None = 0.15,
                  motion_mps_per_s2: float = 6e-6, max_gravity_excess: float = 3e-3, caller: str | None = None,
-                 imu=None):
+                 imu=None, level_window_s: float | None = 20.0, level_noise_max: float = 3e-5):
         self.spec = None if imu is None else load_spec(imu)
+        self.level_window_s = None if not level_window_s else float(level_window_s)
+        self.level_noise_max = float(level_noise_max)
         self.history_points = int(history_points)
         self.fit_points = int(fit_points)
         self.motion_mps = None if motion_mps is None else float(motion_mps)
@@ -373,4 +383,51 @@ class InertialCoarseAligner:
         hist = np.linspace(0, keep.size - 1, self.history_points).round().astype(int)
         hist = np.unique(hist[hist >= fit[0]])
         C_bn = np.swapaxes(C_n_i0[:, hist], -1, -2) @ C_b0_i0[:, None] @ C_keep[:, hist]
+        if self.level_window_s:
+            C_bn = self._relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site)
         return AlignmentResult(self.name, t[keep][hist], C_bn, {"fit_residual_mps": resid, "gravity_excess": excess})
+
+    def _relevel(self, C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site):
+        """Level each attitude of the history on the mean specific force of the ``level_window_s`` before it.
+
+        The fit spreads over the second half of the record, so a gyro bias's drift of the body frame b0 over
+        that half tilts the fitted attitude by about half the drift (2.5 arcmin for 1 deg/h over 300 s). The
+        specific force of the last seconds, resolved in n with the attitude found, should be the base's
+        (gravity, plus the reference's acceleration and Coriolis term on a moving base): a residual
+        ``d = [dE, dN]`` is a tilt ``phiE = dN / g``, ``phiN = -dE / g`` (``f x phi`` with f up; with a reference, its
+        acceleration is the least-squares slope of its samples over the window, so its noise averages out), removed
+        with ``C <- (I + [phi x]) C`` (per recording, unless the reference's slope is too noisy to tell the
+        level to ``level_noise_max``: then the fit's level stays). The azimuth is kept; on an accelerating base its error couples into
+        the level by f_h / g, as it does for any method.
+        """
+        g = site.g
+        for i, j in enumerate(hist):
+            j0 = int(np.searchsorted(tk, tk[j] - self.level_window_s))
+            if j0 >= j:
+                continue
+            dt_w = tk[j] - tk[j0]
+            f_i0 = np.einsum("rab,rb->ra", C_b0_i0, V_keep[:, j] - V_keep[:, j0]) / dt_w
+            # the navigation frame turns by OMEGA_IE dt_w over the window: resolve with its mean over the window
+            # (trapezoid over the kept times; exact to second order in OMEGA_IE dt_w)
+            w = np.diff(tk[j0:j + 1])
+            C_mean = (np.einsum("k,rkab->rab", w, C_n_i0[:, j0:j]) + np.einsum("k,rkab->rab", w, C_n_i0[:, j0 + 1:j + 1]))
+            f_n = np.einsum("rba,rb->ra", C_mean / (2 * dt_w), f_i0)
+            expect = np.broadcast_to(-earth.gravity_n(site.lat, site.h), f_n.shape).copy()
+            use = np.ones(len(f_n), bool)
+            if vref is not None:  # the reference's acceleration: the least-squares slope of its samples (noise averages)
+                seg = slice(keep[j0], keep[j] + 1)
+                tau = t[seg] - t[seg].mean()
+                v = vref[:, seg]
+                v_mean = v.mean(axis=1)
+                accel = np.einsum("k,rkc->rc", tau, v - v_mean[:, None]) / np.sum(tau * tau)
+                w_cor = 2 * earth.earth_rate_n(site.lat) + earth.transport_rate_n(v_mean, site.lat, site.h)
+                expect = accel + np.cross(w_cor, v_mean) - earth.gravity_n(site.lat, site.h)
+                # the slope's own noise, from the samples' scatter about it: a noisy or sparse reference would
+                # tilt the level more than the fit does, so those recordings keep the fit's level
+                scatter = v[..., :2] - v_mean[:, None, :2] - tau[None, :, None] * accel[:, None, :2]
+                slope_sigma = np.sqrt(np.mean(scatter**2, axis=1) / np.sum(tau * tau))
+                use = slope_sigma.max(axis=1) / g < self.level_noise_max
+            d = np.where(use[:, None], f_n - expect, 0.0)
+            phi = np.stack([d[:, 1] / g, -d[:, 0] / g, np.zeros(len(d))], axis=-1)
+            C_bn[:, i] = (np.eye(3) + skew(phi)) @ C_bn[:, i]
+        return orthonormalize(C_bn)

@@ -33,7 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, initial_attitude
+from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable,
+                                 initial_attitude)
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
@@ -83,10 +84,16 @@ class KalmanAligner:
         file or an IMUSpec; default the ``navigation`` preset. Its white noises give Q; its bias sigmas
         (fixed part taken as a sigma too) the initial bias covariance, floored so that the prior is never
         tight (a tight gyro-bias prior biases the tilt). The result's ``extra["imu_model"]`` names it.
-    vel_sigma : float
-        Standard deviation of the reference velocity (each update), m/s.
+    vref_sigma : float
+        Standard deviation of each velocity-reference sample, m/s: R of each update (floored at 1 mm/s, so that
+        an exact reference keeps the update well conditioned). A scenario gives a method with this option the
+        noise of its reference (:func:`fusionbench.aligner.load_method`); 0.05 m/s by default, the disturbance of
+        a vehicle at rest.
     att_sigma_deg : (3,) float
-        Initial misalignment standard deviations [E, N, U] after the initialisation, deg.
+        Initial misalignment standard deviations [E, N, U] after the initialisation, deg. ``None`` for U (the
+        default): 5 deg, or three times the azimuth error the IMU model's gyro bias allows at the site
+        (asin(bias / (earth rate cos L))) when that is larger: a prior tighter than the coarse start's real error
+        makes the filter overconfident (a tactical gyro at 60 deg: 7.4 deg of limit alone).
     coarse_s : float
         Length of the inertial-frame coarse alignment when no initial guess is given, s.
     engine : {"numpy", "filterpy"}
@@ -98,15 +105,19 @@ class KalmanAligner:
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=89.0)
     description = "Kalman fine alignment (11-state psi-angle model, filterpy arithmetic batched over runs, feedback), coarse start"
 
-    def __init__(self, rate_hz=10.0, imu="navigation", vel_sigma=0.05, att_sigma_deg=(1.0, 1.0, 5.0), coarse_s=60.0,
+    def __init__(self, rate_hz=10.0, imu="navigation", vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0,
                  engine="numpy"):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, found {engine!r}")
         self.engine = engine
         self.rate_hz = float(rate_hz)
         self.spec = load_spec(imu)
-        self.vel_sigma = float(vel_sigma)
-        self.att_sigma = np.radians(np.broadcast_to(np.asarray(att_sigma_deg, dtype=float), (3,)))
+        self.vref_sigma = float(vref_sigma)
+        if not (np.isfinite(self.vref_sigma) and self.vref_sigma >= 0):
+            raise ValueError(f"vref_sigma: expected a non-negative standard deviation in m/s, found {vref_sigma!r}")
+        att = list(np.broadcast_to(np.asarray(att_sigma_deg, dtype=object), (3,)))
+        self._att_sigma_u = att[2]
+        self.att_sigma = np.radians([float(att[0]), float(att[1]), 5.0 if att[2] is None else float(att[2])])
         self.coarse_s = float(coarse_s)
         self.min_duration_s = self.coarse_s + 10.0
 
@@ -120,19 +131,25 @@ class KalmanAligner:
         q[8:11] = np.square(a.random_walk) + 2 * np.square(a.instability) / a.tau
         return q
 
-    def _p0(self):
+    def _p0(self, lat=None):
+        """Initial covariance (11,): attitude, velocity (0.1 m/s), body-frame biases; ``lat`` (rad) sets the default
+        azimuth prior from the gyro bias (``att_sigma_deg``)."""
         g, a = self.spec.gyro, self.spec.accel
         eps = np.hypot(np.hypot(g.bias, g.bias_sigma), g.instability)
         nab = np.hypot(np.hypot(a.bias, a.bias_sigma), a.instability)
         # floors: 0.01 deg/h and 10 ug, so that a zero datasheet figure does not freeze the state
         eps = np.maximum(eps, 0.01 * np.pi / 180 / 3600)
         nab = np.maximum(nab, 10e-6 * 9.80665)
-        return np.concatenate([self.att_sigma, [0.1, 0.1], eps, nab]) ** 2
+        att = self.att_sigma.copy()
+        if self._att_sigma_u is None and lat is not None:
+            ratio = min(1.0, azimuth_bias_ratio(self.spec, lat))
+            att[2] = min(max(att[2], 3.0 * np.arcsin(ratio)), np.radians(60.0))
+        return np.concatenate([att, [0.1, 0.1], eps, nab]) ** 2
 
     def _new_bank(self, runs, P0):
         H = np.zeros((2, NX))
         H[0, 3] = H[1, 4] = 1.0
-        return FilterBank(runs, P0, H, np.eye(2) * self.vel_sigma**2, self.engine)
+        return FilterBank(runs, P0, H, np.eye(2) * max(self.vref_sigma, 1e-3) ** 2, self.engine)
 
     def _q_scale(self, bank):
         """Factor (R,) on Q in the next prediction (1; the adaptive variant inflates it)."""
@@ -170,7 +187,7 @@ class KalmanAligner:
         steps = (N - k0) // m
         tail = N - k0 - steps * m  # samples after the last filter step, integrated at the end (time rule)
         qc = self._qc()
-        P0 = self._p0()
+        P0 = self._p0(site.lat)
         bank = self._new_bank(R, P0)
         eps_hat = np.zeros((R, 3))
         nab_hat = np.zeros((R, 3))

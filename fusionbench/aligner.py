@@ -282,15 +282,20 @@ def load_entry(group: str, spec: str, what: str = "method", **options):
     return entry_class(group, spec, what)(**options)
 
 
-def uses_noise_model(cls) -> bool:
-    """Whether a method class takes an IMU noise model (its constructor has an ``imu`` option)."""
+def takes_option(cls, option: str) -> bool:
+    """Whether a method class's constructor has the option ``option``."""
     try:
-        return "imu" in inspect.signature(cls).parameters
+        return option in inspect.signature(cls).parameters
     except (TypeError, ValueError):
         return False
 
 
-def load_method(spec: str, imu=None, **options):
+def uses_noise_model(cls) -> bool:
+    """Whether a method class takes an IMU model (its constructor has an ``imu`` option)."""
+    return takes_option(cls, "imu")
+
+
+def load_method(spec: str, imu=None, vref_sigma=None, **options):
     """Instantiate an alignment method by registered name (named variants included) or ``module:Class`` path.
 
     Parameters
@@ -300,6 +305,9 @@ def load_method(spec: str, imu=None, **options):
     imu : str, path or IMUSpec, optional
         The IMU noise model given to a method that uses one (:func:`uses_noise_model`) unless ``options``
         name one; ignored by the others.
+    vref_sigma : float, optional
+        Standard deviation of each velocity-reference sample, m/s, given to a method with a ``vref_sigma`` option
+        (the filters: their R) unless ``options`` name one; ignored by the others.
     **options
         Constructor options.
 
@@ -309,8 +317,9 @@ def load_method(spec: str, imu=None, **options):
         One line naming the method and what is available.
     """
     cls = entry_class(GROUP, spec, "method")
-    if imu is not None and "imu" not in options and uses_noise_model(cls):
-        options["imu"] = imu
+    for key, value in (("imu", imu), ("vref_sigma", vref_sigma)):
+        if value is not None and key not in options and takes_option(cls, key):
+            options[key] = value
     obj = cls(**options)
     if not isinstance(obj, Aligner):
         raise ValueError(f"method {spec!r}: expected an object with name, description, min_duration_s and align()")

@@ -28,8 +28,22 @@ def misalignment_history(C_bn_est, C_bn_true):
     return attitude.misalignment(C_bn_est, np.asarray(C_bn_true)[None])
 
 
-def theoretical_limits(gyro_bias_b, accel_bias_b, C_bn, lat, h=0.0):
-    """Limit misalignment (rad, ENU) of stationary alignment, shape (..., 3).
+def theoretical_limits(gyro_bias_b, accel_bias_b, C_bn, lat, h=0.0, f_n=None, w_in=None):
+    """Limit misalignment (rad, ENU) of alignment with unknown constant biases, shape (..., 3).
+
+    The steady state of the error model in which the level velocity errors stop changing and the east tilt
+    stops drifting (the gyrocompass condition)::
+
+        dvE' =  fN phiU - fU phiN + nabE = 0
+        dvN' = -fE phiU + fU phiE + nabN = 0
+        phiE' = wU phiN - wN phiU - epsE = 0
+
+    with ``f^n = [fE, fN, fU]`` the base's specific force and ``w_in = [wE, wN, wU]`` the navigation
+    frame's rate (the term wE is dropped with the level rows it multiplies). On a stationary or swaying
+    base (``f_n = [0, 0, g]``, ``w_in`` the earth rate: the defaults) it is the classical limit of the
+    module docstring; on a base accelerating steadily the specific force leans and the azimuth limit
+    couples into the level by fN / g and fE / g (a gyro bias's azimuth limit of 5 deg comes with a
+    level limit of 30 arcmin at 0.1 g).
 
     Parameters
     ----------
@@ -39,19 +53,34 @@ def theoretical_limits(gyro_bias_b, accel_bias_b, C_bn, lat, h=0.0):
         Accelerometer bias, body frame, m/s^2.
     C_bn : array_like, shape (..., 3, 3)
         True attitude.
-    lat : float
+    lat : float or array_like
         Latitude, rad.
-    h : float
+    h : float or array_like
         Height, m.
+    f_n : array_like, shape (..., 3), optional
+        Mean specific force of the base, ENU, m/s^2 (default ``[0, 0, g]``: not accelerating).
+    w_in : array_like, shape (..., 3), optional
+        Rate of the navigation frame, ENU, rad/s (default the earth rate at ``lat``; add the transport
+        rate on a moving base).
     """
     C = np.asarray(C_bn, dtype=float)
     eps = np.einsum("...ij,...j->...i", C, np.asarray(gyro_bias_b, dtype=float))
     nab = np.einsum("...ij,...j->...i", C, np.asarray(accel_bias_b, dtype=float))
     g = earth.gravity(lat, h)
-    wn = earth.OMEGA_IE * np.cos(lat)
-    return np.stack(
-        [-nab[..., 1] / g, nab[..., 0] / g, -eps[..., 0] / wn + np.tan(lat) * nab[..., 0] / g], axis=-1
-    )
+    if f_n is None and w_in is None:  # the closed form
+        wn = earth.OMEGA_IE * np.cos(lat)
+        return np.stack(
+            [-nab[..., 1] / g, nab[..., 0] / g, -eps[..., 0] / wn + np.tan(lat) * nab[..., 0] / g], axis=-1
+        )
+    f = np.broadcast_to(np.stack([np.zeros_like(g), np.zeros_like(g), g], -1) if f_n is None
+                        else np.asarray(f_n, dtype=float), eps.shape)
+    w = np.broadcast_to(earth.earth_rate_n(lat) if w_in is None else np.asarray(w_in, dtype=float), eps.shape)
+    A = np.zeros(eps.shape + (3,))
+    A[..., 0, 1], A[..., 0, 2] = -f[..., 2], f[..., 1]       # dvE' row
+    A[..., 1, 0], A[..., 1, 2] = f[..., 2], -f[..., 0]       # dvN' row
+    A[..., 2, 1], A[..., 2, 2] = w[..., 2], -w[..., 1]       # phiE' row
+    b = -np.stack([nab[..., 0], nab[..., 1], -eps[..., 0]], axis=-1)
+    return np.linalg.solve(A, b[..., None])[..., 0]
 
 
 def settling_time(t, x, band, target=0.0):

@@ -19,7 +19,7 @@ from joblib import Parallel, delayed
 from tqdm import tqdm
 
 from . import imu as imu_mod
-from . import metrics, units
+from . import earth, metrics, units
 from .aligner import check_time_rule, is_causal
 from .imudata import IMUData
 from .io import atomic_open
@@ -112,7 +112,7 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration, refusals=Fals
         check_time_rule(res, data, name)
         truth_C = traj.truth(res.t).C_bn
         phi = metrics.misalignment_history(res.C_bn, truth_C)
-        limit_u = _limits(scn, truth_C)[:, 2]  # (M,) rad: the limit moves with the attitude on a swaying base
+        limit_u = _limits(scn, traj, res.t, truth_C)[:, 2]  # (M,) rad: it moves with the attitude on a sway
         band = scn.settling_band_arcmin * units.ARCMIN
         if is_causal(method):
             settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
@@ -144,9 +144,22 @@ def _run_batch(scn, method_names, first_run, runs, seed, duration, refusals=Fals
 PREFIX_STEP_S = 25.0
 
 
-def _limits(scn, C_bn):
-    """Theoretical limits (..., 3) rad of the scenario's IMU at true attitudes ``C_bn`` (..., 3, 3)."""
-    return metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_bn, scn.site.lat, scn.site.h)
+def _limits(scn, traj, t, C_bn):
+    """Theoretical limits (M, 3) rad of the scenario's fixed IMU biases at times ``t`` (M,) and true attitudes
+    ``C_bn`` (M, 3, 3); on a moving base with the mean specific force and frame rate of its motion (the limit
+    leans with the specific force: :func:`fusionbench.metrics.theoretical_limits`)."""
+    bg, ba = scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias
+    if traj.translation.is_static():
+        return metrics.theoretical_limits(bg, ba, C_bn, scn.site.lat, scn.site.h)
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    v, _ = traj.translation.mean_velocity(t)
+    a = (v - traj.translation.mean_velocity(t - 1.0)[0]) / 1.0  # over the last second: an acceleration that ends
+    # with the record is still the one the data saw
+    lat, _, h = traj.position(t)
+    w_ie, w_en = earth.earth_rate_n(lat), earth.transport_rate_n(v, lat, h)
+    f_n = a + np.cross(2 * w_ie + w_en, v) - earth.gravity_n(lat, h)
+    return metrics.theoretical_limits(bg, ba, C_bn, lat, h,
+                                      f_n=f_n, w_in=w_ie + w_en)
 
 
 def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end):
@@ -172,7 +185,7 @@ def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end):
             break
         res = method.align(part, scn.site, vref=None if vref is None else vref[:, :k + 1], init=init)
         C_true = traj.truth([t_inc[k]]).C_bn
-        err = metrics.misalignment_history(res.C_bn[:, -1:], C_true)[:, 0, 2] - _limits(scn, C_true)[0, 2]
+        err = metrics.misalignment_history(res.C_bn[:, -1:], C_true)[:, 0, 2] - _limits(scn, traj, [t_inc[k]], C_true)[0, 2]
         out = np.isnan(settle) & (np.abs(err) > band)
         settle[out] = prev[out]
         prev[:] = t_inc[k]
@@ -252,9 +265,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     bar.close()
 
     traj = scn.trajectory(duration)
-    C_end = traj.truth([duration]).C_bn[0]
-    limits = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_end,
-                                        scn.site.lat, scn.site.h)
+    limits = _limits(scn, traj, [duration], traj.truth([duration]).C_bn)[0]
     outcomes, refused = {}, {}
     for name in methods:
         parts = [r[name] for r in results]

@@ -87,7 +87,7 @@ def test_accelerometer_noise_only_gives_the_least_squares_line_fits(T):
 # ------------------------------------------------------------------------ 2. the project's Kalman filter
 def test_kalman_monte_carlo_error_matches_the_bound():
     # White noise only (fixed and random biases zero, so the limit is 0). The filter updates at 10 Hz
-    # with one reference sample per update (R = vel_sigma^2): the bound with step 0.1 s and
+    # with one reference sample per update (R = vref_sigma^2): the bound with step 0.1 s and
     # vref_dt 0.1 s has that measurement model. The filter also carries bias states with floored
     # priors (0.01 deg/h, 10 ug) that the data cannot separate from the misalignment; with the true
     # biases zero its phiU estimate is the one of phiU + eps_E / W_N, whose error is the noise part,
@@ -101,7 +101,7 @@ def test_kalman_monte_carlo_error_matches_the_bound():
     vref = simulate_vref(tr, VelocityReferenceSpec((vs,) * 3), data.t, runs=runs, seed=11)
     C0 = tr.truth([0.0]).C_bn[0]
     init = attitude.apply_misalignment(C0, np.random.default_rng(5).normal(0.0, 3 * units.ARCMIN, (runs, 3)))
-    res = KalmanAligner(imu=WHITE, vel_sigma=vs).align(data, SITE, vref=vref, init=init)
+    res = KalmanAligner(imu=WHITE, vref_sigma=vs).align(data, SITE, vref=vref, init=init)
     phi = attitude.misalignment(res.C_bn_final, tr.truth([T]).C_bn[0])
     _, bound = metrics.attainable_bound(WHITE, T, trajectory=tr, vref_sigma=vs, vref_dt=0.1, step_s=0.1)
     # the RMS of N Gaussian errors has a relative std of 1/sqrt(2N) = 0.072: accept 3 of those

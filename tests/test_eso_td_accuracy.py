@@ -94,7 +94,7 @@ def test_a_moving_base_with_a_noisy_reference_is_within_three_times_the_kalman_f
     k0 = int(round(60.0 / dt))
     first = InertialCoarseAligner(history_points=20).align(IMUData(t[:k0], dth[:, :k0], dv[:, :k0]), site,
                                                              vref=vref[:, :k0])
-    kf = KalmanAligner(imu=spec, vel_sigma=sigma).align(IMUData(t[k0:], dth[:, k0:], dv[:, k0:]), site,
+    kf = KalmanAligner(imu=spec, vref_sigma=sigma).align(IMUData(t[k0:], dth[:, k0:], dv[:, k0:]), site,
                                                           vref=vref[:, k0:], init=first.C_bn_final)
     eps, nab = _constant_biases(spec, runs, seed)
     C_end = tr.truth([t[-1]]).C_bn[0]

@@ -43,7 +43,7 @@ def test_noise_free_biased_data_lands_on_the_limits(method, heading):
                    accel=SensorErrors(bias=np.array([30.0, -25.0, 40.0]) * units.UG))
     tr = static(heading, 240.0)
     data = simulate(tr, spec, 0.01, runs=1)
-    res = method(vel_sigma=0.001).align(data, Site(LAT, 1.9, 450.0))  # coarse start, no guess
+    res = method(vref_sigma=0.001).align(data, Site(LAT, 1.9, 450.0))  # coarse start, no guess
     C_end = tr.truth([tr.duration]).C_bn[0]
     phi = attitude.misalignment(res.C_bn_final[0], C_end)
     lim = metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias, C_end, LAT, 450.0)
@@ -60,7 +60,7 @@ def test_kalman_filter_is_consistent_over_50_monte_carlo_runs():
     runs = 50
     data = simulate(tr, spec, 0.01, runs=runs, seed=4)
     vref = simulate_vref(tr, VelocityReferenceSpec((0.01,) * 3), data.t, runs=runs, seed=4)
-    res = KalmanAligner(imu=spec, vel_sigma=0.01).align(data, Site(LAT, 1.9, 450.0), vref=vref)
+    res = KalmanAligner(imu=spec, vref_sigma=0.01).align(data, Site(LAT, 1.9, 450.0), vref=vref)
     phi = attitude.misalignment(res.C_bn_final, tr.truth([tr.duration]).C_bn[0])
     sigma = res.extra["sigma_phi"][:, -1]
     ratio = np.sqrt(np.mean((phi / sigma) ** 2, axis=0))  # RMS of actual over predicted, per axis
@@ -88,7 +88,7 @@ def test_kf_and_gtsam_agree_on_the_same_recording_within_their_predicted_sigma()
     tr = static(200.0, 240.0)
     data = simulate(tr, spec, 0.01, runs=3, seed=9)
     site = Site(LAT, 1.9, 450.0)
-    kf = KalmanAligner(imu=spec, vel_sigma=0.01).align(data, site)
+    kf = KalmanAligner(imu=spec, vref_sigma=0.01).align(data, site)
     fg = FactorGraphAligner().align(data, site)
     diff = attitude.misalignment(kf.C_bn_final, fg.C_bn_final)
     sigma = np.hypot(kf.extra["sigma_phi"][:, -1], fg.extra["sigma_phi_noise"][:, -1])
@@ -105,8 +105,8 @@ def test_batched_filters_give_filterpys_estimates(method):
     vspec = VelocityReferenceSpec((0.05, 0.05, 0.05), (tj_schedule(),))
     vref = simulate_vref(tr, vspec, data.increments()[0], runs=3, seed=11)
     init = attitude.apply_misalignment(tr.truth([0.0]).C_bn[0], [0.3 * D, -0.2 * D, 0.6 * D])
-    a = method(imu=spec, vel_sigma=0.05).align(data, Site(LAT, 1.9, 0.0), vref=vref, init=init)
-    b = method(imu=spec, vel_sigma=0.05, engine="filterpy").align(data, Site(LAT, 1.9, 0.0), vref=vref, init=init)
+    a = method(imu=spec, vref_sigma=0.05).align(data, Site(LAT, 1.9, 0.0), vref=vref, init=init)
+    b = method(imu=spec, vref_sigma=0.05, engine="filterpy").align(data, Site(LAT, 1.9, 0.0), vref=vref, init=init)
     phi = attitude.misalignment(a.C_bn, b.C_bn)
     assert np.abs(phi).max() < 1e-9 * np.pi  # attitude: 1e-9 of a half turn
     for key in ("sigma_phi", "gyro_bias", "accel_bias"):

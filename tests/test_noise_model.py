@@ -84,11 +84,11 @@ def test_filter_takes_its_noise_model_from_the_spec_and_states_it():
 
 
 def test_a_named_variant_is_the_base_class_with_other_defaults():
-    Tight = variant(KalmanAligner, "Tight", "kf-tight", "the filter with a tight reference", vel_sigma=0.001)
+    Tight = variant(KalmanAligner, "Tight", "kf-tight", "the filter with a tight reference", vref_sigma=0.001)
     kf = Tight()
-    assert isinstance(kf, KalmanAligner) and kf.name == "kf-tight" and kf.vel_sigma == 0.001
-    assert Tight(vel_sigma=0.2).vel_sigma == 0.2  # options still override
-    assert Tight.variant_of == "kf" and Tight.variant_options == {"vel_sigma": 0.001}
+    assert isinstance(kf, KalmanAligner) and kf.name == "kf-tight" and kf.vref_sigma == 0.001
+    assert Tight(vref_sigma=0.2).vref_sigma == 0.2  # options still override
+    assert Tight.variant_of == "kf" and Tight.variant_options == {"vref_sigma": 0.001}
     assert uses_noise_model(Tight)  # the base's options survive in the signature
 
 

@@ -124,7 +124,7 @@ def test_jump_window_metrics_and_filter_consistency(tmp_path):
     p.write_text(TOML.replace('methods = ["coarse"]', 'methods = ["coarse", "kf"]').replace("duration_s = 30.0", "duration_s = 120.0")
                  + "[vref]\nsigma_mps = 0.01\nschedule = [{start_s = 40.0, end_s = 80.0, factor = 100.0}]\n"
                  "[metrics]\njump_window_s = [40.0, 80.0]\nsettling_band_arcmin = 30.0\n"
-                 "[variants.kf]\nmethod = \"kf\"\nimu = \"tactical\"\nvel_sigma = 0.01\ncoarse_s = 20.0\n")
+                 "[variants.kf]\nmethod = \"kf\"\nimu = \"tactical\"\nvref_sigma = 0.01\ncoarse_s = 20.0\n")
     m = run_scenario(scenarios.load(p), runs=2, seed=1, progress=False).metrics
     j = m["methods"]["kf"]["jump"]
     assert j["window_s"] == [40.0, 80.0] and set(j["rms_arcmin"]) == {"before", "during", "after"}

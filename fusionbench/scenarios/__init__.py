@@ -167,12 +167,14 @@ class Scenario:
     def method(self, name):
         """Instantiate a method by scenario variant name, registered name or ``module:Class`` path.
 
-        A method that uses an IMU noise model gets the scenario's IMU spec (the true model) unless the
-        variant names one (``imu = "PRESET"`` or a spec file)."""
+        A method that uses an IMU noise model gets the scenario's IMU spec (the true model), and one with a
+        ``vref_sigma`` option the noise of the scenario's velocity reference (m/s per sample, the largest axis),
+        unless the variant sets them."""
+        given = {"imu": self.imu_spec, "vref_sigma": float(max(self.vref_spec.sigma))}
         if name in self.variants:
             options = dict(self.variants[name])
-            return self._variant(name, partial(load_method, imu=self.imu_spec), options.pop("method"), options)
-        return load_method(name, imu=self.imu_spec)
+            return self._variant(name, partial(load_method, **given), options.pop("method"), options)
+        return load_method(name, **given)
 
     def _variant(self, name, loader, spec, options):
         """A variant's method; an option its class refuses is reported against the scenario's table."""
