@@ -10,7 +10,8 @@ import pytest
 from baselines.kalman import KalmanAligner
 from fusionbench import fields, units
 from fusionbench.aligner import load_method, uses_noise_model, variant
-from fusionbench.imu import PRESETS, load_spec
+from fusionbench.aligner import Site
+from fusionbench.imu import PRESETS, IMUData, load_spec
 
 SPEC_TOML = """
 [imu]
@@ -79,8 +80,12 @@ def test_filter_takes_its_noise_model_from_the_spec_and_states_it():
     import dataclasses
     scn = dataclasses.replace(scn, variants={**scn.variants, "kf": {"method": "kf", "imu": "tactical"}})
     assert scn.method("kf").spec.name == "tactical"
-    assert load_method("coarse", imu="mems").name == "coarse"
-    assert uses_noise_model(KalmanAligner) and not uses_noise_model(load_method("coarse").__class__)
+    # every aligner takes an IMU, if only to refuse one whose gyro bias hides the earth rate
+    assert load_method("coarse", imu="mems").spec.name == "mems"
+    assert load_method("coarse").spec is None and uses_noise_model(KalmanAligner)
+    with pytest.raises(ValueError, match="unobservable"):
+        load_method("coarse", imu="mems").align(IMUData([0.01, 0.02], np.zeros((2, 3)), np.zeros((2, 3))),
+                                                 Site.from_degrees(34.0))
 
 
 def test_a_named_variant_is_the_base_class_with_other_defaults():
