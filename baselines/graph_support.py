@@ -116,70 +116,208 @@ def _propagate(C_known, dR, w_n, T, forward):
     return orthonormalize(out)
 
 
-def _window_means(x, centres, half):
-    """Mean of ``x`` (M, 3) over windows ``centres +- half`` samples, shrunk symmetrically at the ends."""
-    M = x.shape[0]
-    cs = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
-    h = np.minimum(half, np.minimum(centres, M - 1 - centres))
-    return (cs[centres + h + 1] - cs[centres - h]) / (2 * h + 1)[:, None]
+def tile_fit(t, v, t_kf, weight=None):
+    """Reference samples reduced to one velocity per keyframe: a weighted local linear fit of the
+    samples nearest to each keyframe (its *tile*), evaluated at the keyframe time.
 
+    The tiles split the record at the midpoints between keyframes, so every sample is used once and
+    the fitted values of different keyframes are independent. Inside a tile the fit is exact for a
+    velocity linear in time (a constant acceleration); on a tile centred on its keyframe the value
+    is the weighted mean, at the ends of the record (one-sided tiles) an extrapolation whose
+    variance the fit accounts for.
 
-def marginal_sigmas(graph, values, C_kf):
-    """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias prior, and with the bias known.
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Sample times, s.
+    v : ndarray, shape (M, 3)
+        Samples (ENU velocity, m/s).
+    t_kf : ndarray, shape (K,)
+        Keyframe times, s, increasing.
+    weight : ndarray, shape (M,), optional
+        Inverse variance of each sample relative to the unit (default all 1).
 
-    The graph is linearised at the solution and eliminated by QR in the order
-    ``X(0), V(0), X(1), ..., V(K-1), B(0)``: a Bayes net ``p(B) prod p(x_f | parents)`` of
-    unit-noise conditionals ``R x_f + S x_P = d + e``. Backwards from ``B(0)``, with the bias
-    known, ``Sigma_fP = -A Sigma_PP`` and ``Sigma_ff = R^-1 R^-T + A Sigma_PP A^T``
-    (``A = R^-1 S``; each parent set is a clique whose covariances are already known), and the
-    sensitivity to the bias is ``M_f = -A M_P``; with the bias prior,
-    ``Sigma_ff + M_f Sigma_BB M_f^T``. gtsam's Pose3 tangent is [rotation, translation] in the
-    body frame with ``R = R_hat Exp(delta)``; the misalignment is ``phi = -C_bn delta``, so its
-    covariance is ``C_bn S C_bn^T`` with S the rotation block.
+    Returns
+    -------
+    value : ndarray, shape (K, 3)
+        Fitted velocity at each keyframe time (zero where a tile is empty).
+    var : ndarray, shape (K,)
+        Variance of ``value`` per unit sample variance (``inf`` where a tile is empty): the prior's
+        sigma is the per-sample sigma times ``sqrt(var)``, ``1/n`` for a centred tile of n samples.
+    rss : ndarray, shape (K,)
+        Weighted residual sum of squares of the fit, summed over the three axes.
+    dof : ndarray, shape (K,)
+        Its degrees of freedom, ``3 (n - 2)`` (zero for fewer than three samples).
+    tile : ndarray of int, shape (M,)
+        The keyframe each sample belongs to.
     """
-    K = C_kf.shape[0]
-    full, noise = np.full((K, 3), np.nan), np.full((K, 3), np.nan)
-    dims = {"x": 6, "v": 3, "b": 6}
-    try:
-        lin = graph.linearize(values)
+    K = t_kf.size
+    w = np.ones(t.size) if weight is None else np.asarray(weight, dtype=float)
+    tile = np.searchsorted(0.5 * (t_kf[1:] + t_kf[:-1]), t, side="left")
+    tau = t - t_kf[tile]
+    n = np.bincount(tile, minlength=K)
+    s0, s1, s2 = (np.bincount(tile, w * tau**p, minlength=K) for p in range(3))
+    y0 = np.stack([np.bincount(tile, w * v[:, i], minlength=K) for i in range(3)], axis=1)
+    y1 = np.stack([np.bincount(tile, w * tau * v[:, i], minlength=K) for i in range(3)], axis=1)
+    det = s0 * s2 - s1**2
+    line = (n >= 2) & (det > 1e-12 * np.maximum(s0 * s2, 1e-300))
+    value, var = np.zeros((K, 3)), np.full(K, np.inf)
+    slope = np.zeros((K, 3))
+    value[line] = (s2[line, None] * y0[line] - s1[line, None] * y1[line]) / det[line, None]
+    slope[line] = (s0[line, None] * y1[line] - s1[line, None] * y0[line]) / det[line, None]
+    var[line] = s2[line] / det[line]
+    single = (n >= 1) & ~line
+    value[single] = y0[single] / s0[single, None]
+    var[single] = 1.0 / s0[single]
+    res = v - value[tile] - slope[tile] * tau[:, None]
+    rss = np.bincount(tile, w * np.sum(res**2, axis=1), minlength=K)
+    dof = 3 * np.maximum(n - 2, 0)
+    return value, var, rss, dof, tile
+
+
+_DIMS = {"x": 6, "v": 3, "b": 6}
+_KEY_DIMS = {}
+
+
+def _dim(key):
+    """Tangent dimension of a key (Pose3 6, velocity 3, bias 6)."""
+    d = _KEY_DIMS.get(key)
+    if d is None:
+        d = _KEY_DIMS[key] = _DIMS[chr(gtsam.Symbol(key).chr())]
+    return d
+
+
+def _offsets(keys):
+    """Start of each key's block in a stacked tangent vector, and the total size, as ints."""
+    off = [0]
+    for k in keys:
+        off.append(off[-1] + _dim(k))
+    return off
+
+
+class Posterior:
+    """The Gaussian posterior of a keyframe graph linearised at its solution.
+
+    The graph is eliminated by QR in the order ``X(0), V(0), X(1), ..., V(K-1)`` and then the bias
+    keys: a Bayes net ``p(B) prod p(x_f | parents)`` of unit-noise conditionals
+    ``R x_f + S x_P = d + e``. Backwards, first over the bias keys (their joint covariance
+    ``S_bb``), then, with the biases known, ``Sigma_fP = -A Sigma_PP`` and
+    ``Sigma_ff = R^-1 R^-T + A Sigma_PP A^T`` (``A = R^-1 S``; each parent set is a clique whose
+    covariances are already known) together with the sensitivity to the biases ``M_f = -A M_P``.
+    The covariance of keys a, b is then ``Sigma_ab + M_a S_bb M_b^T`` (with the bias priors) or
+    ``Sigma_ab`` (biases known). Linear in K; ``gtsam.Marginals`` factors by Cholesky, which fails
+    on these nearly singular graphs. Covariances are in gtsam's tangent spaces (Pose3: rotation then
+    translation, body frame, ``R = R_hat Exp(delta)``).
+
+    Parameters
+    ----------
+    graph : gtsam.NonlinearFactorGraph
+    values : gtsam.Values
+    K : int
+        Number of keyframes (keys ``X(k)``, ``V(k)``).
+    bias_keys : sequence of int
+        The bias keys, in time order.
+
+    Raises
+    ------
+    RuntimeError
+        When gtsam cannot eliminate the graph.
+    """
+
+    def __init__(self, graph, values, K, bias_keys):
+        self.lin = graph.linearize(values)
         order = gtsam.Ordering()
         for k in range(K):
             order.push_back(X(k))
             order.push_back(V(k))
-        order.push_back(B(0))
-        net = lin.eliminateSequential(order, gtsam.EliminateQR)
-        cov, sens = {}, {}
+        for b in bias_keys:
+            order.push_back(b)
+        net = self.lin.eliminateSequential(order, gtsam.EliminateQR)
+        nb = len(bias_keys)
+        self.bias_keys = list(bias_keys)
+        sel = {b: np.zeros((6, 6 * nb)) for b in bias_keys}
+        for j, b in enumerate(bias_keys):
+            sel[b][:, 6 * j:6 * j + 6] = np.eye(6)
+        cov, sens, cov_b = {}, dict(sel), {}
         for i in range(net.size() - 1, -1, -1):
             c = net.at(i)
             model = c.get_model()
-            if model is not None and not np.allclose(model.sigmas(), 1.0):
+            if model is not None and np.abs(model.sigmas() - 1.0).max() > 1e-8:
                 raise RuntimeError("non-unit conditional")
             keys = list(c.keys())
             f, parents = keys[0], keys[1:]
-            # upper triangular, 3x3 or 6x6: scipy's solve_triangular costs milliseconds per call when its
-            # threaded BLAS competes for the cores (19 s per recording measured), numpy's inverse 0.03 ms
-            Ri = np.linalg.inv(c.R())
-            if not parents:  # the bias
-                cov[f, f], sens[f], S_bb = np.zeros((6, 6)), np.eye(6), Ri @ Ri.T
+            Ri = np.linalg.inv(c.R())  # upper triangular, 3x3 or 6x6 (scipy's solve_triangular costs
+            # milliseconds per call when its threaded BLAS competes for the cores)
+            A = Ri @ c.S() if parents else None
+            if f in sel:  # a bias key: joint covariance of the biases
+                if parents:
+                    P = self._assemble(cov_b, parents)
+                    cross = -A @ P
+                    cov_b[f, f] = Ri @ Ri.T - cross @ A.T
+                    off = _offsets(parents)
+                    for j, p in enumerate(parents):
+                        cov_b[f, p] = cross[:, off[j]:off[j + 1]]
+                else:
+                    cov_b[f, f] = Ri @ Ri.T
                 continue
-            sizes = [dims[chr(gtsam.Symbol(p).chr())] for p in parents]
-            off = np.cumsum([0] + sizes)
-            P = np.empty((off[-1], off[-1]))
-            for a, pa in enumerate(parents):
-                for b, pb in enumerate(parents):
-                    P[off[a]:off[a + 1], off[b]:off[b + 1]] = cov[pa, pb] if (pa, pb) in cov else cov[pb, pa].T
-            A = Ri @ c.S()
+            P = self._assemble(cov, parents)
             cross = -A @ P
             cov[f, f] = Ri @ Ri.T - cross @ A.T
+            off = _offsets(parents)
             for j, p in enumerate(parents):
-                cov[f, p] = cross[:, off[j]:off[j + 1]]
+                if p not in sel:
+                    cov[f, p] = cross[:, off[j]:off[j + 1]]
             sens[f] = -A @ np.vstack([sens[p] for p in parents])
+        self._cov, self._sens = cov, sens
+        self.S_bb = self._assemble(cov_b, self.bias_keys) if nb else np.zeros((0, 0))
+
+    @staticmethod
+    def _assemble(cov, keys):
+        off = _offsets(keys)
+        P = np.zeros((off[-1], off[-1]))
+        for a, ka in enumerate(keys):
+            for b, kb in enumerate(keys):
+                if (ka, kb) in cov:
+                    blk = cov[ka, kb]
+                elif (kb, ka) in cov:
+                    blk = cov[kb, ka].T
+                else:  # a bias key in the noise-only covariance, or keys never in one clique
+                    continue
+                P[off[a]:off[a + 1], off[b]:off[b + 1]] = blk
+        return P
+
+    def cov(self, keys, bias=True):
+        """Joint covariance of ``keys`` (which must lie in one clique: a factor's keys do), with the
+        bias priors (``bias=True``) or with the biases known."""
+        P = self._assemble(self._cov, keys)
+        if bias and self.bias_keys:
+            M = np.vstack([self._sens[k] for k in keys])
+            P = P + M @ self.S_bb @ M.T
+        return P
+
+    def attitude_sigmas(self, C_kf):
+        """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias priors, and with the biases
+        known. The misalignment is ``phi = -C_bn delta`` (delta the rotation part of the Pose3
+        tangent), so its covariance is ``C_bn S C_bn^T``."""
+        K = C_kf.shape[0]
+        full, noise = np.empty((K, 3)), np.empty((K, 3))
         for k in range(K):
             C = C_kf[k]
-            S_noise = cov[X(k), X(k)][:3, :3]
-            M = sens[X(k)][:3]
+            S_noise = self._cov[X(k), X(k)][:3, :3]
+            M = self._sens[X(k)][:3]
             noise[k] = np.sqrt(np.clip(np.diag(C @ S_noise @ C.T), 0.0, None))
-            full[k] = np.sqrt(np.clip(np.diag(C @ (S_noise + M @ S_bb @ M.T) @ C.T), 0.0, None))
+            full[k] = np.sqrt(np.clip(np.diag(C @ (S_noise + M @ self.S_bb @ M.T) @ C.T), 0.0, None))
+        return full, noise
+
+
+def marginal_sigmas(graph, values, C_kf, bias_keys=None):
+    """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias priors, and with the biases
+    known (NaN when the graph cannot be eliminated). ``bias_keys`` default: ``[B(0)]``, one constant
+    bias. See :class:`Posterior`."""
+    K = C_kf.shape[0]
+    bias_keys = [B(0)] if bias_keys is None else bias_keys
+    try:
+        return Posterior(graph, values, K, bias_keys).attitude_sigmas(C_kf)
     except (RuntimeError, KeyError, ValueError):
-        pass
-    return full, noise
+        return np.full((K, 3), np.nan), np.full((K, 3), np.nan)
+
