@@ -1,4 +1,4 @@
-"""Factor-graph fine alignment on gtsam (methods ``gtsam`` and ``gtsam-robust``).
+"""Factor-graph fine alignment on gtsam (methods ``gtsam``, ``gtsam-robust`` and ``gtsam-adaptive``).
 
 Frames and conventions
 ----------------------
@@ -50,8 +50,8 @@ The IMU model
 densities (floored at 1e-5 deg/sqrt(h) and 0.1 ug/sqrt(Hz)); bias priors
 ``sqrt(bias^2 + bias_sigma^2 + instability^2)`` (the fixed bias is a datasheet figure whose sign
 the estimator does not know, so it counts as a spread), floored at 0.01 deg/h and 10 ug like the
-Kalman aligner's; the bias walk above. Its noise schedules are not used (the Kalman aligner does not
-use them either). Explicit ``gyro_noise``, ``accel_noise``, ``gyro_bias_sigma``,
+Kalman aligner's; the bias walk above. Its noise schedules are not used (estimating a change of
+noise is ``gtsam-adaptive``'s job). Explicit ``gyro_noise``, ``accel_noise``, ``gyro_bias_sigma``,
 ``accel_bias_sigma`` override it. ``imu=None`` keeps the figures of earlier versions: seed000's
 white noise (0.005 deg/sqrt(h), 6 ug/sqrt(Hz)), bias priors 0.1 deg/h and 100 ug, a constant bias.
 
@@ -87,6 +87,26 @@ on a stationary base (static-r-jump) nothing of it matters beyond the bias prior
 give 1.20, 1.21, 1.23, 1.24 arcmin on the moving base (10 runs) at 0.53, 0.27, 0.15, 0.09 s per
 recording.
 
+gtsam-adaptive
+--------------
+A noise level that changes during the record (seed 001's Q x 100 and R x 100 tests) is not an
+outlier problem (a Huber weight helps only where residuals are many sigmas) but a variance
+problem. :class:`AdaptiveFactorGraphAligner` solves the graph, then estimates, per window of
+``adapt_window_s`` (10 s), a variance factor of the reference samples and one of the
+preintegrated IMU noise by variance-component estimation: for a group of factors whose true
+covariance is ``lambda`` times the assumed one, ``E[sum b^T b] = lambda sum r`` with ``b`` the
+whitened residuals at the solution and ``r = m - tr(A Sigma A^T)`` the redundancy numbers (``A``
+the whitened Jacobian, ``Sigma`` the posterior covariance of the factor's keys,
+:class:`baselines.graph_support.Posterior`); the reference adds the scatter of its samples about
+their tile fits (``3 (n - 2)`` degrees of freedom per tile), so its factor is sharp in every
+window, while the IMU's redundancy is small (about 1 per 10 s on a stationary base, 0.01 on
+the 10-Hz moving base, where the 0.1-m/s reference sees nothing of the IMU noise) and a window
+borrows from its neighbours until it has ``adapt_min_dof`` (10), with ``adapt_prior_dof`` (10) pseudo-degrees
+of freedom at the nominal model. The samples are then weighted by ``1 / lambda`` in their tile
+fits, each ImuFactor's covariance is multiplied by its window's factor (the preintegration is
+reused: ``cloneWithNewNoiseModel``), and the graph is solved again from the previous solution,
+until no factor changes by more than 5 % (at most ``adapt_iterations``, 6).
+
 Moving base and accuracy details
 --------------------------------
 * The IMU increments get the coning and sculling compensation of the strapdown
@@ -118,7 +138,8 @@ Moving base and accuracy details
 Cost
 ----
 A 600-s record at 100 Hz (600 keyframes) takes about 0.5 s per recording with the marginals
-(``gtsam``); 0.25 s of it the coarse stage when ``init`` is None.
+(``gtsam``), 2 s for ``gtsam-adaptive`` (a few re-solutions, each with the posterior covariances
+of every factor); 0.25 s of it the coarse stage when ``init`` is None.
 
 Marginals
 ---------
@@ -149,10 +170,10 @@ from fusionbench.imudata import IMUData
 
 from .coarse import InertialCoarseAligner
 from .graph_support import (Posterior, _interval_rotations, _propagate, compensated_increments,  # noqa: F401
-                            keyframe_counts, marginal_sigmas, tile_fit)
+                            keyframe_counts, marginal_sigmas, residual_statistics, tile_fit)
 
-__all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "keyframe_counts", "compensated_increments",
-           "MAX_LATITUDE_DEG", "noise_model"]
+__all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "AdaptiveFactorGraphAligner", "keyframe_counts",
+           "compensated_increments", "MAX_LATITUDE_DEG", "noise_model"]
 
 #: Highest |latitude| accepted, deg: the horizontal earth rate W cos(L) that sets the heading vanishes at the poles.
 MAX_LATITUDE_DEG = 89.0
@@ -227,7 +248,7 @@ class FactorGraphAligner:
     imu : IMUSpec, optional
         The sensor model (:class:`fusionbench.imu.IMUSpec`) from which the white-noise densities, the
         bias priors and the bias random walk come (:func:`noise_model`); its noise schedules are not
-        used. None:
+        used (a change of noise level is what :class:`AdaptiveFactorGraphAligner` estimates). None:
         seed000's white noise, bias priors 0.1 deg/h and 100 ug, a constant bias. Its name is
         reported as ``extra["imu_model"]``.
     gyro_noise : float or (3,) float, optional
@@ -277,6 +298,8 @@ class FactorGraphAligner:
     robust = False
     #: A smoother: the estimate at every keyframe uses the whole record.
     causal = False
+    #: Keys of the per-recording extras that are the same for every recording (kept once).
+    _shared_extra = ("adapt_window_t",)
 
     def __init__(self, keyframe_s=1.0, imu=None, gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
                  accel_bias_sigma=None, velocity_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
@@ -453,7 +476,8 @@ class FactorGraphAligner:
             pim = pims[k - 1]
             f = gtsam.ImuFactor(X(k - 1), V(k - 1), X(k), V(k), B(seg[k - 1]), pim)
             if imu_scale is not None and imu_scale[k - 1] != 1.0:
-                f = f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.Covariance(imu_scale[k - 1] * pim.preintMeasCov()))
+                cov = imu_scale[k - 1] * pim.preintMeasCov()
+                f = f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.Covariance(cov))
             imu_idx[k - 1] = graph.size()
             graph.add(f)
         sig_v = self.velocity_sigma * np.sqrt(refs["v_var"])
@@ -518,6 +542,10 @@ class FactorGraphAligner:
             pims = None
         return graph, values, C_kf, iterations, n_pass, converged, imu_idx, vel_idx, pims
 
+    def _refine(self, problem, sol, ctx):
+        """Hook for the adaptive variant: the final solution and a dict of per-recording extras."""
+        return sol, {}
+
     # ------------------------------------------------------------------------------------- align
     def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align every recording of ``imu`` by factor-graph smoothing, from any heading.
@@ -571,6 +599,7 @@ class FactorGraphAligner:
         bg, ba = np.empty((R, 3)), np.empty((R, 3))
         iters, passes, cost = np.zeros(R, int), np.zeros(R, int), np.empty(R)
         restarted = np.zeros(R, bool)
+        per_run = []
         for r in range(R):
             refs = self._references(site, None if vref is None else vref[r], t_end, t_kf, counts, dt)
             refs["C0"] = None if (init is None or self.init_sigma is None) else init[r]
@@ -594,6 +623,9 @@ class FactorGraphAligner:
                 if other[0].error(other[1]) < sol[0].error(sol[1]):
                     sol = other
                 sol = sol[:3] + (spent,) + sol[4:]
+            ctx = {"site": site, "vref": None if vref is None else vref[r], "t_end": t_end, "t_kf": t_kf}
+            sol, more = self._refine(problem, sol, ctx)
+            per_run.append(more)
             graph, values, C_kf, iters[r], passes[r] = sol[:5]
             cost[r] = graph.error(values)
             C_out[r] = C_kf
@@ -604,6 +636,9 @@ class FactorGraphAligner:
         extra = {"sigma_phi": sig, "sigma_phi_noise": sig_noise, "gyro_bias": bg, "accel_bias": ba,
                  "iterations": iters, "passes": passes, "restarted": restarted, "graph_error": cost,
                  "keyframe_s": self.keyframe_s, "imu_model": self.imu_model}
+        for key in (per_run[0] if per_run else {}):
+            stacked = np.stack([m[key] for m in per_run])
+            extra[key] = stacked[0] if key in self._shared_extra else stacked
         return AlignmentResult(self.name, t_kf, C_out, extra)
 
 
@@ -616,10 +651,141 @@ class RobustFactorGraphAligner(FactorGraphAligner):
     sigmas (default 1.345, 95 % efficiency on Gaussian noise). Parameters as for
     :class:`FactorGraphAligner`. On data whose velocity residuals stay inside the threshold it
     gives the same result. It is no answer to a change of noise level (all samples noisier, none an
-    outlier).
+    outlier): :class:`AdaptiveFactorGraphAligner` is.
     """
 
     name = "gtsam-robust"
     description = "factor-graph fine alignment with Huber-robust velocity priors (gtsam)"
     robust = True
 
+
+class AdaptiveFactorGraphAligner(FactorGraphAligner):
+    """Noise-adaptive factor-graph fine alignment (method ``gtsam-adaptive``).
+
+    The graph of :class:`FactorGraphAligner`, whose reference-noise variance and IMU noise level are
+    estimated per time window from the residuals of the solution, and the graph solved again with
+    them (iterated variance-component estimation, module docstring). The record is cut into windows
+    of ``adapt_window_s``; in each, two variance factors (covariance multipliers): ``lambda_v`` of
+    the reference samples and ``lambda_i`` of the preintegrated IMU noise (gyro and accelerometer
+    together). From a solution, for each group, ``lambda = (nu + sum(lambda_old b^T b)) / (nu +
+    sum(r))`` over the window, with the whitened residuals ``b`` and redundancy numbers ``r`` of
+    its factors (:func:`baselines.graph_support.residual_statistics`) and, for the reference, the
+    scatter of the samples about their tile fits (``3 (n - 2)`` degrees of freedom per tile). A
+    window with less than ``adapt_min_dof`` of redundancy pools its neighbours, up to
+    ``adapt_smooth`` either side; ``nu = adapt_prior_dof`` pseudo-degrees of freedom at the nominal
+    model (``lambda = 1``) keep a window that sees little near it. The reference samples are then
+    weighted ``1 / lambda_v`` in their tile fits, each ImuFactor's covariance is multiplied by
+    ``lambda_i``, and the graph is solved again from the previous solution, until no factor changes
+    by more than ``adapt_tol`` (relative) or after ``adapt_iterations`` rounds.
+
+    Parameters
+    ----------
+    adapt_window_s : float
+        Window length, s (default 10 s).
+    adapt_iterations : int
+        At most this many re-solutions (default 6).
+    adapt_tol : float
+        Stop when every factor changed by less than this, relative (default 0.05).
+    adapt_smooth : int
+        At most this many neighbouring windows pooled on each side (default 5).
+    adapt_min_dof : float
+        Redundancy a window's estimate gathers before it stops pooling neighbours (default 10).
+    adapt_prior_dof : float
+        Pseudo-degrees of freedom of the nominal model in each estimate (default 10: on a stationary
+        base, 2 left the heading 10 % worse than the fixed graph's in nominal windows, static-r-jump,
+        while a x100 IMU jump still gets a factor of 25 to 100, within 5 % of the best weighting).
+    adapt_bounds : (float, float)
+        Bounds of the variance factors (default 0.01 and 1e4).
+    **kw
+        As for :class:`FactorGraphAligner`.
+
+    ``extra`` adds ``reference_variance_scale`` and ``imu_variance_scale`` (R, W), the final variance
+    factors of the W windows (square roots: the noise sigma relative to ``velocity_sigma`` and to
+    the IMU model), ``adapt_window_t`` (W,) the windows' centres, s, and ``adapt_rounds`` (R,).
+    """
+
+    name = "gtsam-adaptive"
+    description = ("noise-adaptive factor-graph fine alignment (gtsam; reference and IMU noise levels per window by "
+                   "variance-component estimation)")
+
+    def __init__(self, adapt_window_s=10.0, adapt_iterations=6, adapt_tol=0.05, adapt_smooth=5, adapt_min_dof=10.0,
+                 adapt_prior_dof=10.0, adapt_bounds=(1e-2, 1e4), **kw):
+        super().__init__(**kw)
+        self.adapt_min_dof = float(adapt_min_dof)
+        self.adapt_window_s = self._positive("adapt_window_s", adapt_window_s)
+        self.adapt_tol = self._positive("adapt_tol", adapt_tol)
+        for key, val in (("adapt_iterations", adapt_iterations), ("adapt_smooth", adapt_smooth + 1)):
+            if int(val) != val or val < 1:
+                raise ValueError(f"{key}: expected a {'non-negative' if key == 'adapt_smooth' else 'positive'} "
+                                 f"integer, found {val}")
+        self.adapt_iterations, self.adapt_smooth = int(adapt_iterations), int(adapt_smooth)
+        if not (np.isfinite(adapt_prior_dof) and adapt_prior_dof >= 0):
+            raise ValueError(f"adapt_prior_dof: expected a non-negative number, found {adapt_prior_dof}")
+        self.adapt_prior_dof = float(adapt_prior_dof)
+        lo, hi = (float(x) for x in adapt_bounds)
+        if not 0 < lo <= 1 <= hi < np.inf:
+            raise ValueError(f"adapt_bounds: expected 0 < low <= 1 <= high, found {adapt_bounds}")
+        self.adapt_bounds = (lo, hi)
+
+    def _update(self, lam, e2, red, window, W):
+        """New variance factors (W,) from a group's whitened squares and redundancies per factor.
+
+        Each window pools its neighbours, out to ``adapt_smooth`` windows either side, only as far as
+        needed to gather ``adapt_min_dof`` degrees of freedom (redundancy): a window rich in redundancy
+        keeps a sharp estimate (a noise jump keeps its edges), a poor one borrows from its neighbours.
+        """
+        E = np.bincount(window, e2, W) * lam
+        Rn = np.bincount(window, red, W)
+        cE, cR = np.r_[0.0, np.cumsum(E)], np.r_[0.0, np.cumsum(Rn)]
+        idx = np.arange(W)
+        Es, Rs = E.copy(), Rn.copy()
+        for rho in range(1, self.adapt_smooth + 1):
+            short = Rs < self.adapt_min_dof
+            if not short.any():
+                break
+            lo, hi = np.maximum(idx - rho, 0), np.minimum(idx + rho + 1, W)
+            Es[short], Rs[short] = (cE[hi] - cE[lo])[short], (cR[hi] - cR[lo])[short]
+        nu = self.adapt_prior_dof
+        return np.clip((nu + Es) / np.maximum(nu + Rs, 1e-12), *self.adapt_bounds)
+
+    def _refine(self, problem, sol, ctx):
+        phi, dv, dt, counts, refs, seg, walk = problem
+        t_kf, t_end = ctx["t_kf"], ctx["t_end"]
+        K = counts.size
+        W = max(1, int(round((t_kf[-1] - t_kf[0]) / self.adapt_window_s)))
+
+        def window(t):
+            return np.minimum(((t - t_kf[0]) / self.adapt_window_s).astype(int), W - 1)
+
+        w_kf, w_int, w_smp = window(t_kf), window(0.5 * (t_kf[1:] + t_kf[:-1])), window(t_end)
+        bias_keys = [B(j) for j in range(int(seg.max()) + 1)]
+        imu_keys = [[X(k - 1), V(k - 1), X(k), V(k), B(seg[k - 1])] for k in range(1, K)]
+        vel_keys = [[V(k)] for k in range(K)]
+        lam_v, lam_i = np.ones(W), np.ones(W)
+        rounds = 0
+        for rounds in range(1, self.adapt_iterations + 1):
+            graph, values, C_kf = sol[:3]
+            try:
+                post = Posterior(graph, values, K, bias_keys)
+            except (RuntimeError, KeyError, ValueError):
+                break
+            e_i, r_i = residual_statistics(post, imu_keys, sol[6])
+            e_v, r_v = residual_statistics(post, vel_keys, sol[7])
+            e_v = e_v + refs["rss"] / self.velocity_sigma**2
+            r_v = r_v + refs["dof"]
+            new_i = self._update(lam_i, e_i, r_i, w_int, W)
+            new_v = self._update(lam_v, e_v, r_v, w_kf, W)
+            change = max(np.abs(np.log(new_i / lam_i)).max(), np.abs(np.log(new_v / lam_v)).max())
+            lam_i, lam_v = new_i, new_v
+            refs = {**self._references(ctx["site"], ctx["vref"], t_end, t_kf, counts, dt, weight=1.0 / lam_v[w_smp]),
+                    "C0": refs.get("C0")}
+            problem = (phi, dv, dt, counts, refs, seg, walk)
+            spent = sol[3]
+            sol = self._solve(problem, C_kf, values=values, imu_scale=lam_i[w_int], pims=sol[8])
+            sol = sol[:3] + (spent + sol[3],) + sol[4:]
+            if change < np.log1p(self.adapt_tol):
+                break
+        centres = t_kf[0] + (np.arange(W) + 0.5) * self.adapt_window_s
+        centres[-1] = 0.5 * (t_kf[0] + (W - 1) * self.adapt_window_s + t_kf[-1])
+        return sol, {"reference_variance_scale": lam_v, "imu_variance_scale": lam_i, "adapt_window_t": centres,
+                     "adapt_rounds": rounds}

@@ -321,3 +321,41 @@ def marginal_sigmas(graph, values, C_kf, bias_keys=None):
     except (RuntimeError, KeyError, ValueError):
         return np.full((K, 3), np.nan), np.full((K, 3), np.nan)
 
+
+def residual_statistics(post, factor_keys, factor_index):
+    """Whitened squared residuals and redundancy numbers of factors, for variance-component estimation.
+
+    For a factor with whitened Jacobian ``A`` and whitened residual ``b`` at the solution (``m`` rows)
+    and the posterior covariance ``Sigma`` of its keys, ``E[b^T b] = m - tr(A Sigma A^T)`` when the
+    factor's covariance is right: the redundancy number, the share of the factor's rows that the rest
+    of the graph checks. A group of factors whose covariance is ``lambda`` times the assumed one has
+    ``E[sum b^T b] = lambda sum r``, which is what the adaptive graph solves for.
+
+    Parameters
+    ----------
+    post : Posterior
+        The linearised, eliminated graph (its ``lin`` keeps the factor order of the graph).
+    factor_keys : sequence of sequences of int
+        The keys of each factor, in the factor's own key order.
+    factor_index : sequence of int
+        The factors' indices in the graph (negative: skipped, zeros returned).
+
+    Returns
+    -------
+    e2, red : ndarray, each (len(factor_index),)
+        ``b^T b`` and ``m - tr(A Sigma A^T)``.
+    """
+    n = len(factor_index)
+    e2, red = np.zeros(n), np.zeros(n)
+    for i, (keys, idx) in enumerate(zip(factor_keys, factor_index)):
+        if idx < 0:
+            continue
+        lf = post.lin.at(int(idx))
+        A, b = lf.jacobian()
+        lin_keys = list(lf.keys())
+        if lin_keys != list(keys):
+            raise RuntimeError("factor keys out of order")
+        S = post.cov(lin_keys)
+        e2[i] = float(b @ b)
+        red[i] = A.shape[0] - float(np.einsum("ij,jk,ik->", A, S, A))
+    return e2, red

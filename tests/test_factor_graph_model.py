@@ -1,15 +1,20 @@
 """Factor-graph alignment: the IMU model as an input, the per-sample weighting of the reference, the
-accuracy and calibrated sigmas on a moving base against the Kalman filter, and the attitude prior."""
+accuracy and calibrated sigmas on a moving base against the Kalman filter, the attitude prior, and the
+noise-adaptive graph's variance estimates in seed 001's jump tests."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner, noise_model
+from baselines.factor_graph import (AdaptiveFactorGraphAligner, FactorGraphAligner, RobustFactorGraphAligner,
+                                    noise_model)
 from baselines.graph_support import tile_fit
 from baselines.kalman import KalmanAligner
 from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
 from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, simulate, simulate_vref
+from fusionbench.imu import (PRESETS, IMUSpec, NoiseSchedule, SensorErrors, VelocityReferenceSpec, simulate,
+                            simulate_vref)
 
 D = np.pi / 180
 LAT = 34 * D
@@ -41,7 +46,7 @@ def test_the_noise_figures_come_from_the_imu_model_and_explicit_figures_override
     assert walk[3:] == pytest.approx(m["gyro_bias_walk"] * np.sqrt(30.0))
     seg, walk = FactorGraphAligner(imu=PRESETS["seed000"])._bias_segments(np.arange(0.0, 301.0))
     assert seg.max() == 0 and not walk.any()  # a constant bias
-    for cls in (FactorGraphAligner, RobustFactorGraphAligner):
+    for cls in (FactorGraphAligner, RobustFactorGraphAligner, AdaptiveFactorGraphAligner):
         assert cls.causal is False
     with pytest.raises(ValueError, match="imu"):
         FactorGraphAligner(imu="seed000")
@@ -130,3 +135,61 @@ def test_an_attitude_prior_on_init_enters_with_its_weight_like_the_kalman_filter
         phi_kf = attitude.misalignment(kf.C_bn_final[0], C_end)
         assert phi_fg[2] == pytest.approx(phi_kf[2], rel=0.05)
         assert abs(phi_fg[2]) < 0.5 * abs(lim[2])
+
+
+def test_the_adaptive_graph_finds_the_reference_variance_jump_of_seed001():
+    # paper001-r-jump, one run: reference variance x100 from 200 to 400 s
+    scn = scenarios.get("paper001-r-jump")
+    traj = scn.trajectory()
+    data = simulate(traj, scn.imu_spec, scn.dt, runs=1, seed=4)
+    vref = simulate_vref(traj, scn.vref_spec, data.increments()[0], runs=1, seed=4)
+    init = scn.initial_guess(traj.truth([0.0]).C_bn[0])
+    fg = AdaptiveFactorGraphAligner(imu=replace(scn.imu_spec, schedules=()), velocity_sigma=0.1)
+    res = fg.align(data, scn.site, vref=vref, init=init)
+    t, lam = res.extra["adapt_window_t"], res.extra["reference_variance_scale"][0]
+    inside, outside = (t > 210) & (t < 390), (t < 190) | (t > 410)
+    # each 10-s window holds about 240 degrees of freedom: the variance to about 10 %
+    assert np.median(lam[inside]) == pytest.approx(100.0, rel=0.15)
+    assert np.all((lam[inside] > 60) & (lam[inside] < 160))
+    assert np.all((lam[outside] > 0.7) & (lam[outside] < 1.4))
+    # the IMU noise is nominal here (and invisible to a 0.1-m/s reference): its factors stay near 1
+    assert np.all(np.abs(np.log(res.extra["imu_variance_scale"][0])) < np.log(1.5))
+    C_end = traj.truth([traj.duration]).C_bn[0]
+    assert abs(attitude.misalignment(res.C_bn_final[0], C_end)[2]) < 5 * units.ARCMIN
+
+
+def test_the_adaptive_graph_weights_an_imu_noise_jump_and_its_sigma_says_so():
+    # stationary, white gyro and accelerometer noise only (the limits are zero), PSD x100 from 100 to
+    # 250 s of 400 s, a zero-velocity reference of 0.01 m/s per sample: the heading comes from
+    # gyrocompassing, whose noise sigma with noise density q over an effective time T_eff is
+    # q / (W cos L sqrt(T_eff)); weighting the noisy part right, T_eff = 250 + 150/100 s, and a
+    # variance factor anywhere above 25 there loses less than 5 % of it. The fixed model weighs the
+    # noisy part like the rest: its sigma believes 400 s of nominal noise, its errors are far larger.
+    white = SensorErrors(white=(0.005 * units.DEG_PER_SQRT_H,) * 3)
+    awhite = SensorErrors(white=(6.0 * units.UG_PER_SQRT_HZ,) * 3)
+    spec = IMUSpec(gyro=white, accel=awhite, name="white")
+    noisy = replace(spec, schedules=(NoiseSchedule(100.0, 250.0, 100.0),))
+    tr = tj.Trajectory(LAT, 0.3, 50.0, tj.EulerSway(mean=(1 * D, -2 * D, -123 * D)), duration=400.0)
+    data, site = simulate(tr, noisy, 0.01, runs=2, seed=5), Site(LAT, 0.3, 50.0)
+    vref = simulate_vref(tr, VelocityReferenceSpec(sigma=(0.01,) * 3), data.increments()[0], runs=2, seed=5)
+    init = attitude.euler_platform_to_dcm(np.radians([0.3333, 0.3333, 0.6667])) @ tr.truth([0.0]).C_bn[0]
+    res = AdaptiveFactorGraphAligner(imu=spec).align(data, site, vref=vref, init=init)
+    fixed = FactorGraphAligner(imu=spec).align(data, site, vref=vref, init=init)
+    t, lam = res.extra["adapt_window_t"], res.extra["imu_variance_scale"]
+    inside, outside = (t > 120) & (t < 230), (t < 80) | (t > 270)
+    # a 10-s window holds 1 to 15 degrees of freedom of IMU noise: the factors are coarse, and shrunk
+    # towards the nominal model (10 pseudo-degrees of freedom), but they find the jump
+    assert np.all((np.median(lam[:, inside], axis=1) > 20) & (np.median(lam[:, inside], axis=1) < 300))
+    assert np.all((np.median(lam[:, outside], axis=1) > 0.5) & (np.median(lam[:, outside], axis=1) < 2))
+    assert np.all(np.abs(np.log(res.extra["reference_variance_scale"])) < np.log(1.3))
+    wcl = earth.OMEGA_IE * np.cos(LAT)
+    ideal = white.white[0] / (wcl * np.sqrt(250.0 + 1.5))
+    assert res.extra["sigma_phi_noise"][:, -1, 2] == pytest.approx(np.full(2, ideal), rel=0.5)
+    assert fixed.extra["sigma_phi_noise"][:, -1, 2] == pytest.approx(
+        np.full(2, white.white[0] / (wcl * np.sqrt(400.0))), rel=0.1)
+    C_end = tr.truth([400.0]).C_bn[0]
+    e_ad = np.array([attitude.misalignment(C, C_end)[2] for C in res.C_bn_final])
+    e_fx = np.array([attitude.misalignment(C, C_end)[2] for C in fixed.C_bn_final])
+    assert np.all(np.abs(e_ad) < 3 * res.extra["sigma_phi_noise"][:, -1, 2])
+    assert np.sqrt(np.mean(e_fx**2)) > 3 * ideal  # 35 arcmin against 5
+    assert np.sqrt(np.mean(e_ad**2)) < 0.25 * np.sqrt(np.mean(e_fx**2))
