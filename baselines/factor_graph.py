@@ -495,9 +495,12 @@ class FactorGraphAligner:
             graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(C0), refs["p_kf"][0]),
                                              gtsam.noiseModel.Gaussian.Covariance(cov)))
         b_sigmas = np.r_[np.broadcast_to(self.accel_bias_sigma, (3,)), np.broadcast_to(self.gyro_bias_sigma, (3,))]
-        graph.add(gtsam.PriorFactorConstantBias(B(0), zero, gtsam.noiseModel.Diagonal.Sigmas(b_sigmas)))
+        # smart=False: gtsam makes a model with a sigma below 1e-9 a Constrained one (a navigation-grade
+        # gyro's walk over 30 s is 1.3e-9 rad/s)
+        graph.add(gtsam.PriorFactorConstantBias(B(0), zero, gtsam.noiseModel.Diagonal.Sigmas(b_sigmas, False)))
+        walk_noise = gtsam.noiseModel.Diagonal.Sigmas(walk, False) if seg.max() > 0 else None
         for j in range(1, int(seg.max()) + 1):
-            graph.add(gtsam.BetweenFactorConstantBias(B(j - 1), B(j), zero, gtsam.noiseModel.Diagonal.Sigmas(walk)))
+            graph.add(gtsam.BetweenFactorConstantBias(B(j - 1), B(j), zero, walk_noise))
         return graph, imu_idx, vel_idx
 
     def _optimize(self, graph, values):

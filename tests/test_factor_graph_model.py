@@ -4,12 +4,14 @@ noise-adaptive graph's variance estimates in seed 001's jump tests."""
 
 from dataclasses import replace
 
+import gtsam
 import numpy as np
 import pytest
+from gtsam.symbol_shorthand import B, V, X
 
 from baselines.factor_graph import (AdaptiveFactorGraphAligner, FactorGraphAligner, RobustFactorGraphAligner,
                                     noise_model)
-from baselines.graph_support import tile_fit
+from baselines.graph_support import Posterior, tile_fit
 from baselines.kalman import KalmanAligner
 from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
 from fusionbench.aligner import Site
@@ -76,6 +78,70 @@ def test_tile_fits_equal_an_independent_least_squares_fit_per_tile():
     _, var1, *_ = tile_fit(t, v, t_kf)
     assert var1[5] == pytest.approx(1 / 10 + 0.05**2 / 0.825)
     assert var1[0] == pytest.approx(1 / 5 + 0.3**2 / 0.1)
+
+
+def _small_graph(smart):
+    """Seven keyframes of a stationary IMU, velocity priors, an attitude prior, two bias keys tied by a
+    random-walk factor whose gyro sigma (5e-10) gtsam's smart constructor makes a Constrained model."""
+    rng = np.random.default_rng(0)
+    p = gtsam.PreintegrationParams.MakeSharedU(9.8)
+    p.setGyroscopeCovariance(np.eye(3) * 1e-10)
+    p.setAccelerometerCovariance(np.eye(3) * 1e-6)
+    p.setIntegrationCovariance(np.eye(3) * 1e-12)
+    p.setOmegaCoriolis(np.array([0.0, 6e-5, 4e-5]))
+    K, seg = 7, [0, 0, 0, 1, 1, 1]
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    for k in range(1, K):
+        pim = gtsam.PreintegratedImuMeasurements(p, gtsam.imuBias.ConstantBias())
+        for _ in range(100):
+            pim.integrateMeasurement(np.array([0, 0, 9.8]) + 1e-3 * rng.standard_normal(3),
+                                     np.array([0, 6e-5, 4e-5]) + 1e-5 * rng.standard_normal(3), 0.01)
+        graph.add(gtsam.ImuFactor(X(k - 1), V(k - 1), X(k), V(k), B(seg[k - 1]), pim))
+    for k in range(K):
+        noise = gtsam.noiseModel.Isotropic.Sigma(3, 0.01)
+        graph.add(gtsam.PriorFactorVector(V(k), 0.01 * rng.standard_normal(3), noise))
+        values.insert(X(k), gtsam.Pose3())
+        values.insert(V(k), np.zeros(3))
+    graph.add(gtsam.GPSFactor(X(0), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, 1.0)))
+    attitude_prior = gtsam.noiseModel.Diagonal.Sigmas(np.r_[0.01, 0.01, 0.1, 1e3, 1e3, 1e3])
+    graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(), attitude_prior))
+    zero = gtsam.imuBias.ConstantBias()
+    bias_prior = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[1e-3] * 3, [1e-6] * 3])
+    graph.add(gtsam.PriorFactorConstantBias(B(0), zero, bias_prior))
+    walk = gtsam.noiseModel.Diagonal.Sigmas(np.r_[[1e-5] * 3, [5e-10] * 3], smart)
+    graph.add(gtsam.BetweenFactorConstantBias(B(0), B(1), zero, walk))
+    values.insert(B(0), zero)
+    values.insert(B(1), zero)
+    return graph, gtsam.LevenbergMarquardtOptimizer(graph, values).optimize(), K
+
+
+def test_posterior_covariances_equal_a_dense_inverse_and_survive_a_constrained_noise_model():
+    graph, values, K = _small_graph(smart=False)
+    post = Posterior(graph, values, K, [B(0), B(1)])
+    keys = [X(2), V(2), X(3), V(3), B(0)]
+    # independent: the whitened Jacobian of the whole graph, its covariance by SVD (no Cholesky)
+    order, all_keys = gtsam.Ordering(), [X(k) for k in range(K)] + [V(k) for k in range(K)] + [B(0), B(1)]
+    for k in all_keys:
+        order.push_back(k)
+    A, _ = graph.linearize(values).jacobian(order)
+    off = np.cumsum([0] + [6] * K + [3] * K + [6, 6])
+
+    def dense(cols):
+        _, s, vt = np.linalg.svd(A[:, :cols], full_matrices=False)
+        return (vt.T / s**2) @ vt
+
+    idx = np.concatenate([np.arange(off[all_keys.index(k)], off[all_keys.index(k) + 1]) for k in keys])
+    for P, ref in ((post.cov(keys), dense(off[-1])[np.ix_(idx, idx)]),
+                   (post.cov(keys[:4], bias=False), dense(off[2 * K])[np.ix_(idx[:18], idx[:18])])):
+        d = np.sqrt(np.diag(ref))
+        assert np.abs((P - ref) / np.outer(d, d)).max() < 1e-5
+    # gtsam turns a sigma below 1e-9 into a Constrained model, whose QR conditional keeps its sigmas:
+    # the same Gaussian, the same covariances (they were NaN before)
+    graph_c, values_c, _ = _small_graph(smart=True)
+    assert any(isinstance(graph_c.at(i).noiseModel(), gtsam.noiseModel.Constrained) for i in range(graph_c.size()))
+    P_c = Posterior(graph_c, values_c, K, [B(0), B(1)]).cov(keys)
+    d = np.sqrt(np.diag(post.cov(keys)))
+    assert np.abs((P_c - post.cov(keys)) / np.outer(d, d)).max() < 1e-6
 
 
 @pytest.fixture(scope="module")
