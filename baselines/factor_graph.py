@@ -23,17 +23,25 @@ intervals long). Each keyframe has a pose ``X(k)`` (``C_bn``, position) and a ve
   heading (gyrocompassing, the whole point) would never move. The gyro and accelerometer
   white-noise densities of the IMU model set the preintegration covariance; the integration
   covariance is small.
-* a velocity prior on every ``V(k)`` from the reference samples nearest to keyframe k (its
-  *tile*: the record is split at the midpoints between keyframes, so every sample is used once):
-  their linear fit in time evaluated at the keyframe (:func:`baselines.graph_support.tile_fit`),
-  or zero on a stationary base (``vref=None``, a zero-velocity pseudo-measurement at every
-  sample). ``velocity_sigma`` is the noise of **one sample**, independent between samples; the
-  prior's sigma is the fit's, ``velocity_sigma / sqrt(n)`` for n samples centred on the keyframe
-  and about twice that for the one-sided tiles at the ends of the record. In ``gtsam-robust``
-  it carries a Huber M-estimator.
+* a velocity factor on every keyframe from the reference samples nearest to it (its *tile*: the
+  record is split at the midpoints between keyframes, so every sample is used once), each sample
+  compared with the velocity the IMU predicts at its own time from the keyframe's state:
+  ``V(k) + R(k) (U_k - Mb_k b_a) = z_k`` (:func:`baselines.graph_support.velocity_factor`), with
+  ``z_k`` the tile's mean of the samples less gravity and Coriolis since the keyframe, ``U_k`` the
+  mean of the measured velocity increments from the keyframe to each sample in its body frame and
+  ``Mb_k`` what an accelerometer bias adds to them. Any motion within a tile is followed (a mean or
+  a line fit of the samples against ``V(k)`` alone is biased by the velocity's curvature: 20 to
+  190 arcmin on a vehicle wobbling at 0.5 m/s rms, 0.1 to 2 Hz, with a perfect IMU and reference),
+  and the within-tile accelerations inform the attitude as in a Kalman filter's updates. The factor
+  is linearised at the current solution (a ``LinearContainerFactor``, in C++) and relinearised
+  until the attitude moves by less than ``recompensate_rad``. On a stationary base without a
+  reference (``vref=None``) the samples are zero-velocity pseudo-measurements. ``velocity_sigma``
+  is the noise of **one sample**, independent between samples: the factor's sigma is
+  ``velocity_sigma / sqrt(n)`` for n samples. In ``gtsam-robust`` it carries Huber weights
+  (iteratively reweighted: 1 within ``huber_k`` sigmas of the whitened error's norm).
 * a loose position prior (``GPSFactor``, ``position_sigma``) on ``X(0)`` only; it fixes the
   otherwise free position. The integrated reference is a function of the same samples as the
-  velocity priors, so position priors on every keyframe would count the reference twice and take
+  velocity factors, so position priors on every keyframe would count the reference twice and take
   its integrated noise (a random walk) for independent errors (measured below).
 * a zero-mean prior on ``B(0)``, and when the IMU model's bias walks (``random_walk``, or an
   ``instability`` of correlation time ``tau``), random-walk factors
@@ -170,7 +178,8 @@ from fusionbench.imudata import IMUData
 
 from .coarse import InertialCoarseAligner
 from .graph_support import (Posterior, _interval_rotations, _propagate, compensated_increments,  # noqa: F401
-                            keyframe_counts, marginal_sigmas, residual_statistics, tile_fit)
+                            keyframe_counts, marginal_sigmas, residual_statistics, tile_increments, tile_means,
+                            tile_scatter, tile_sums, tiles, velocity_error, velocity_factor)
 
 __all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "AdaptiveFactorGraphAligner", "keyframe_counts",
            "compensated_increments", "MAX_LATITUDE_DEG", "noise_model"]
@@ -237,7 +246,7 @@ def _scalar_or_axes(x):
 
 class FactorGraphAligner:
     """Factor-graph fine alignment (method ``gtsam``): gtsam ImuFactors with earth-rate Coriolis,
-    velocity priors from every reference sample and a bias with zero-mean priors, solved by
+    velocity factors from every reference sample and a bias with zero-mean priors, solved by
     Levenberg-Marquardt (see the module docstring). A smoother: each keyframe's estimate uses the
     whole record (``causal = False``).
 
@@ -262,9 +271,9 @@ class FactorGraphAligner:
         Sigma of the zero-mean accelerometer-bias prior, m/s^2; overrides the model's.
     velocity_sigma : float
         Noise of one reference sample, m/s, each ENU axis, independent between samples (or of the
-        zero-velocity assumption at each sample when ``vref`` is None). Each keyframe's prior is the
-        fit of its tile of samples, with sigma ``velocity_sigma / sqrt(n)`` for n samples centred on
-        it (module docstring).
+        zero-velocity assumption at each sample when ``vref`` is None). Each keyframe's velocity
+        factor holds the n samples of its tile, with sigma ``velocity_sigma / sqrt(n)`` (module
+        docstring).
     position_sigma : float
         Sigma of the loose position prior on the first keyframe, m (it only fixes the otherwise free
         position).
@@ -293,8 +302,8 @@ class FactorGraphAligner:
     """
 
     name = "gtsam"
-    description = ("factor-graph fine alignment (gtsam ImuFactors, earth-rate Coriolis, velocity priors from every "
-                   "reference sample, bias priors from the IMU model)")
+    description = ("factor-graph fine alignment (gtsam ImuFactors, earth-rate Coriolis, every reference sample against "
+                   "the IMU's velocity at its time, bias priors from the IMU model)")
     robust = False
     #: A smoother: the estimate at every keyframe uses the whole record.
     causal = False
@@ -379,11 +388,20 @@ class FactorGraphAligner:
         return vref, init
 
     # --------------------------------------------------------------------------------- the model
-    def _velocity_noise(self, sigma):
-        base = gtsam.noiseModel.Isotropic.Sigma(3, float(sigma))
+    def _huber_weights(self, problem, priors, values):
+        """Huber weights of the velocity factors at ``values`` (robust variant; all 1 otherwise): 1 within
+        ``huber_k`` sigmas of the whitened error's norm, ``huber_k / |e|`` beyond (gtsam's Huber on a
+        block)."""
+        K = problem["counts"].size
         if not self.robust:
-            return base
-        return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(self.huber_k), base)
+            return np.ones(K)
+        seg = problem["seg"]
+        R = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
+        v = np.stack([values.atVector(V(k)) for k in range(K)])
+        b = np.stack([values.atConstantBias(B(seg[min(k, K - 2)])).accelerometer() for k in range(K)])
+        e = velocity_error(R, v, b, priors["z"], priors["U"], priors["Mb"])
+        r = np.linalg.norm(e, axis=1) / (self.velocity_sigma * np.sqrt(priors["v_var"]))
+        return np.where(r <= self.huber_k, 1.0, self.huber_k / np.maximum(r, 1e-300))
 
     def _params(self, g, omega):
         """PreintegrationParams: z-up (ENU) gravity g (m/s^2), Coriolis rate omega (ENU, rad/s), noise densities."""
@@ -405,24 +423,36 @@ class FactorGraphAligner:
         seg = np.minimum(((t_kf[:-1] - t_kf[0]) / self.bias_interval_s).astype(int), n - 1)
         return seg, walk * np.sqrt(self.bias_interval_s)
 
-    def _references(self, site, vref_r, t_end, t_kf, counts, dt, weight=None):
-        """Keyframe velocity priors and per-interval rates and gravity for one recording.
+    def _problem(self, site, vref_r, t_end, t_kf, counts, dt, dtheta, dvel, init):
+        """What does not depend on the attitude, for one recording (a dict).
 
-        Returns a dict: ``v_kf`` (K, 3) m/s and ``v_var`` (K,) the fitted reference velocity at the
-        keyframes and its variance per unit sample variance (:func:`tile_fit`; zero velocity when
-        ``vref_r`` is None); ``p_kf`` (K, 3) m (ENU) the integrated reference; ``w_in`` (K-1, 3) rad/s
-        the turn rate of ENU over each interval (earth plus transport rate), ``c_n`` (K-1, 3) m/s^2
-        the specific-force correction ``omega_en x v + omega_in x (omega_in x p)`` and ``g`` (K-1,)
-        m/s^2; ``rss``, ``dof``, ``tile``: the fit's residuals (:func:`tile_fit`).
+        ``phi``, ``dv`` (M, 3) the compensated increments; ``v`` (M, 3) the reference samples (zero
+        velocity when ``vref_r`` is None); ``tile`` (M,) their keyframes, ``u`` (M, 3) the velocity
+        increments in the keyframe body frames (:func:`baselines.graph_support.tile_increments`),
+        ``U`` (M, 3) their sums from the keyframe to each sample (m/s) and ``Mb`` (M, 3, 3) the same
+        sums of ``C_{b_k}^{b_j} dt`` (s),
+        ``tau`` (M,) the start of each sample less its keyframe's time, ``w_s`` (M, 3) rad/s and
+        ``a_s`` (M, 3) m/s^2 the turn rate of ENU and ``g - (2 omega_ie + omega_en) x v`` at each
+        sample; ``p_kf`` (K, 3) m (ENU) the integrated reference; ``w_in`` (K-1, 3) rad/s the turn
+        rate of ENU over each interval (earth plus transport rate), ``c_n`` (K-1, 3) m/s^2 the
+        specific-force correction ``omega_en x v + omega_in x (omega_in x p)`` and ``g`` (K-1,)
+        m/s^2; ``C0`` the attitude prior's mean or None; ``weight`` (M,) the samples' relative
+        inverse variances or None.
         """
-        K = counts.size
-        v_samples = np.zeros((t_end.size, 3)) if vref_r is None else vref_r
-        v_kf, v_var, rss, dof, tile = tile_fit(t_end, v_samples, t_kf, weight)
-        out = {"v_kf": v_kf, "v_var": v_var, "rss": rss, "dof": dof, "tile": tile}
+        K, M = counts.size, t_end.size
+        phi, dv = compensated_increments(dtheta, dvel)
+        tile = tiles(t_end, t_kf)
+        u, R_rel = tile_increments(phi, dv, counts, tile)
+        out = {"phi": phi, "dv": dv, "dt": dt, "counts": counts, "t_end": t_end, "t_kf": t_kf, "tile": tile,
+               "u": u, "U": tile_sums(u, tile, counts), "Mb": tile_sums(R_rel * dt, tile, counts),
+               "tau": t_end - dt - t_kf[tile], "weight": None,
+               "C0": None if (init is None or self.init_sigma is None) else init}
+        interval = np.minimum(np.searchsorted(counts, np.arange(M), side="right") - 1, K - 2)
         if vref_r is None:
             w = earth.earth_rate_n(site.lat)
-            out.update(p_kf=np.zeros((K, 3)), w_in=np.broadcast_to(w, (K - 1, 3)), c_n=np.zeros((K - 1, 3)),
-                       g=np.full(K - 1, site.g))
+            out.update(v=np.zeros((M, 3)), p_kf=np.zeros((K, 3)), w_in=np.broadcast_to(w, (K - 1, 3)),
+                       c_n=np.zeros((K - 1, 3)), g=np.full(K - 1, site.g), w_s=np.broadcast_to(w, (M, 3)),
+                       a_s=np.broadcast_to([0.0, 0.0, -site.g], (M, 3)))
             return out
         v_prev = np.vstack([vref_r[:1], vref_r[:-1]])
         p = np.vstack([np.zeros((1, 3)), np.cumsum(0.5 * (vref_r + v_prev) * dt, axis=0)])
@@ -432,18 +462,46 @@ class FactorGraphAligner:
         rm, _ = earth.radii(site.lat)
         lat = site.lat + p_mid[:, 1] / (rm + site.h)
         h = site.h + p_mid[:, 2]
+        w_ie = earth.earth_rate_n(lat)
         w_en = earth.transport_rate_n(v_bar, lat, h)
-        w_in = earth.earth_rate_n(lat) + w_en
+        w_in = w_ie + w_en
+        g = earth.gravity(lat, h)
         # gtsam applies 2 w_in x v (ENU needs (2 w_ie + w_en) x v) and the centrifugal term of a frame
         # turning about an axis through the origin, w_in x (w_in x p) (in normal gravity already)
         c_n = np.cross(w_en, v_bar) + np.cross(w_in, np.cross(w_in, p_mid))
-        out.update(p_kf=p_kf, w_in=w_in, c_n=c_n, g=earth.gravity(lat, h))
+        g_s = np.zeros((M, 3))
+        g_s[:, 2] = -g[interval]
+        out.update(v=vref_r, p_kf=p_kf, w_in=w_in, c_n=c_n, g=g, w_s=w_in[interval],
+                   a_s=g_s - np.cross((w_in + w_ie)[interval], vref_r))
         return out
 
-    def _preintegrate(self, phi, dv, dt, counts, C_kf, refs):
+    def _priors(self, problem, C_kf):
+        """The keyframe velocity factors' data (:func:`baselines.graph_support.velocity_factor`): ``z``,
+        ``U`` (K, 3) m/s, ``Mb`` (K, 3, 3) s and ``v_var`` (K,) the variance of ``z`` per unit sample
+        variance; ``y`` (M, 3)
+        the samples less the attitude-free part of the predicted velocity change since their keyframe
+        (gravity, Coriolis, and the turn of ENU, small, evaluated with ``C_kf``)."""
+        pr = problem
+        turn = -np.cross(pr["w_s"] * pr["tau"][:, None], np.einsum("mij,mj->mi", C_kf[pr["tile"]], pr["u"]))
+        y = pr["v"] - tile_sums(pr["a_s"] * pr["dt"] + turn, pr["tile"], pr["counts"])
+        var, z, U_bar, Mb = tile_means(pr["tile"], pr["counts"].size, pr["weight"], y, pr["U"], pr["Mb"])
+        return {"z": z, "U": U_bar, "Mb": Mb, "v_var": var, "y": y}
+
+    def _scatter(self, problem, priors, C_kf, b_acc):
+        """The samples' weighted scatter about the velocity the solution (attitudes ``C_kf``, accelerometer
+        biases ``b_acc`` (K, 3) per keyframe) predicts at their times, per keyframe, and its degrees of
+        freedom (:func:`baselines.graph_support.tile_scatter`)."""
+        pr = problem
+        tile = pr["tile"]
+        U = pr["U"] - np.einsum("mij,mj->mi", pr["Mb"], b_acc[tile])
+        r = priors["y"] - np.einsum("mij,mj->mi", C_kf[tile], U)
+        return tile_scatter(r, pr["tile"], pr["t_end"], pr["t_kf"], pr["weight"])
+
+    def _preintegrate(self, problem, C_kf):
         """Preintegrated IMU measurements of the K-1 keyframe intervals; the transport-rate correction
         uses attitude ``C_kf`` (K, 3, 3)."""
-        w_in, c_n, g = refs["w_in"], refs["c_n"], refs["g"]
+        phi, dv, dt, counts = problem["phi"], problem["dv"], problem["dt"], problem["counts"]
+        w_in, c_n, g = problem["w_in"], problem["c_n"], problem["g"]
         K = counts.size
         acc = dv / dt
         if np.any(c_n):
@@ -461,12 +519,13 @@ class FactorGraphAligner:
             pims.append(pim)
         return pims
 
-    def _graph(self, pims, refs, seg, walk, imu_scale=None):
-        """The factor graph of one recording from its preintegrated intervals ``pims``.
+    def _graph(self, pims, priors, refs, seg, walk, at, imu_scale=None, huber=None):
+        """The factor graph of one recording from its preintegrated intervals ``pims`` and its velocity
+        factors, linearised at the values ``at``.
 
-        ``imu_scale`` (K-1,) multiplies the preintegrated covariance of each interval (default 1).
-        Returns the graph and the indices of its ImuFactors (K-1,) and velocity priors (K,; -1 where a
-        keyframe has no reference sample).
+        ``imu_scale`` (K-1,) multiplies the preintegrated covariance of each interval, ``huber`` (K,) the
+        velocity factors' information (default 1). Returns the graph and the indices of its ImuFactors
+        (K-1,) and velocity factors (K,; -1 where a keyframe has no reference sample).
         """
         K = len(pims) + 1
         graph = gtsam.NonlinearFactorGraph()
@@ -480,11 +539,13 @@ class FactorGraphAligner:
                 f = f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.Covariance(cov))
             imu_idx[k - 1] = graph.size()
             graph.add(f)
-        sig_v = self.velocity_sigma * np.sqrt(refs["v_var"])
+        sig_v = self.velocity_sigma * np.sqrt(priors["v_var"] / (1.0 if huber is None else huber))
         for k in range(K):
             if np.isfinite(sig_v[k]):
                 vel_idx[k] = graph.size()
-                graph.add(gtsam.PriorFactorVector(V(k), refs["v_kf"][k], self._velocity_noise(sig_v[k])))
+                keys = (X(k), V(k), B(seg[min(k, K - 2)]))
+                lin = (at.atPose3(keys[0]), at.atVector(keys[1]), at.atConstantBias(keys[2]).accelerometer())
+                graph.add(velocity_factor(keys, priors["z"][k], priors["U"][k], priors["Mb"][k], sig_v[k], lin))
         graph.add(gtsam.GPSFactor(X(0), refs["p_kf"][0], gtsam.noiseModel.Isotropic.Sigma(3, self.position_sigma)))
         if refs.get("C0") is not None:
             # phi = -C_bn delta (delta: Pose3 rotation tangent, body frame): cov(delta) = C^T diag(sigma^2) C
@@ -515,37 +576,47 @@ class FactorGraphAligner:
     def _solve(self, problem, C_kf, values=None, imu_scale=None, pims=None):
         """Optimise one recording from keyframe attitudes ``C_kf`` (K, 3, 3) (or from ``values``).
 
-        Returns ``(graph, values, C_kf, iterations, passes, converged, imu_idx, vel_idx, pims)``; the
-        graph is rebuilt with the optimised attitude (moving base only) until it moves by less than
-        ``recompensate_rad``. ``pims``: intervals already preintegrated with an attitude within
-        ``recompensate_rad`` of ``C_kf``, used for the first build.
+        Returns ``(graph, values, C_kf, iterations, passes, converged, imu_idx, vel_idx, pims, priors)``.
+        The velocity factors are linearised at the current solution and, on a moving base, the
+        preintegration compensated for the transport rate with its attitude; the graph is rebuilt there
+        until the attitude moves by less than ``recompensate_rad`` (and, in the robust variant, the Huber
+        weights settle). ``pims``: intervals already preintegrated with an attitude within
+        ``recompensate_rad`` of ``C_kf``.
         """
-        phi, dv, dt, counts, refs, seg, walk = problem
+        counts, seg, walk = problem["counts"], problem["seg"], problem["walk"]
         K = counts.size
+        priors = self._priors(problem, C_kf)
         if values is None:
             values = gtsam.Values()
             for k in range(K):
-                values.insert(X(k), gtsam.Pose3(gtsam.Rot3(C_kf[k]), refs["p_kf"][k]))
-                values.insert(V(k), refs["v_kf"][k])
+                values.insert(X(k), gtsam.Pose3(gtsam.Rot3(C_kf[k]), problem["p_kf"][k]))
+                values.insert(V(k), priors["z"][k] - C_kf[k] @ priors["U"][k])
             for j in range(int(seg.max()) + 1):
                 values.insert(B(j), gtsam.imuBias.ConstantBias())
         iterations, converged = 0, True
-        for n_pass in range(1, self.max_passes + 1):
+        huber = self._huber_weights(problem, priors, values)
+        c_max = np.abs(problem["c_n"]).max()
+        passes = max(self.max_passes, 10) if self.robust else self.max_passes
+        for n_pass in range(1, passes + 1):
             if pims is None:
-                pims = self._preintegrate(phi, dv, dt, counts, C_kf, refs)
-            graph, imu_idx, vel_idx = self._graph(pims, refs, seg, walk, imu_scale)
+                pims = self._preintegrate(problem, C_kf)
+            graph, imu_idx, vel_idx = self._graph(pims, priors, problem, seg, walk, values, imu_scale, huber)
             values, n_it = self._optimize(graph, values)
             iterations += n_it
-            converged = n_it < self.max_iterations
+            converged = converged and n_it < self.max_iterations  # a pass stopped at the limit may have stalled
             C_new = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
             moved = np.abs(dcm_to_rotvec(C_new @ np.swapaxes(C_kf, -1, -2))).max()
             C_kf = C_new
-            if moved <= self.recompensate_rad or moved * np.abs(refs["c_n"]).max() <= 1e-9:
+            new_huber = self._huber_weights(problem, priors, values)
+            settled = np.abs(new_huber - huber).max() <= 1e-3
+            huber = new_huber
+            if moved <= self.recompensate_rad and settled:
                 break
-            pims = None
-        return graph, values, C_kf, iterations, n_pass, converged, imu_idx, vel_idx, pims
+            if moved > self.recompensate_rad and moved * c_max > 1e-9:  # the compensation matters
+                pims = None
+        return graph, values, C_kf, iterations, n_pass, converged, imu_idx, vel_idx, pims, priors
 
-    def _refine(self, problem, sol, ctx):
+    def _refine(self, problem, sol):
         """Hook for the adaptive variant: the final solution and a dict of per-recording extras."""
         return sol, {}
 
@@ -604,30 +675,28 @@ class FactorGraphAligner:
         restarted = np.zeros(R, bool)
         per_run = []
         for r in range(R):
-            refs = self._references(site, None if vref is None else vref[r], t_end, t_kf, counts, dt)
-            refs["C0"] = None if (init is None or self.init_sigma is None) else init[r]
-            phi, dv = compensated_increments(dth[r], dvel[r])
-            problem = (phi, dv, dt, counts, refs, seg, walk)
-            _, dR = _interval_rotations(phi, counts, None)
+            problem = self._problem(site, None if vref is None else vref[r], t_end, t_kf, counts, dt, dth[r], dvel[r],
+                                    None if init is None else init[r])
+            problem.update(seg=seg, walk=walk)
+            _, dR = _interval_rotations(problem["phi"], counts, None)
             if init is not None:
-                start = _propagate(init[r], dR, refs["w_in"], T, forward=True)
+                start = _propagate(init[r], dR, problem["w_in"], T, forward=True)
             else:
-                start = _propagate(orthonormalize(coarse_final[r]), dR, refs["w_in"], T, forward=False)
+                start = _propagate(orthonormalize(coarse_final[r]), dR, problem["w_in"], T, forward=False)
             sol = self._solve(problem, start)
             if init is not None and not sol[5]:
                 # LM stopped at its iteration limit from the given guess: start again from the coarse
                 # alignment and keep the better solution
                 if coarse_final is None:
                     coarse_final = self.coarse.align(imu, site, vref=vref).C_bn_final
-                other = self._solve(problem, _propagate(orthonormalize(coarse_final[r]), dR, refs["w_in"], T,
+                other = self._solve(problem, _propagate(orthonormalize(coarse_final[r]), dR, problem["w_in"], T,
                                                         forward=False))
                 restarted[r] = True
                 spent = sol[3] + other[3]
                 if other[0].error(other[1]) < sol[0].error(sol[1]):
                     sol = other
                 sol = sol[:3] + (spent,) + sol[4:]
-            ctx = {"site": site, "vref": None if vref is None else vref[r], "t_end": t_end, "t_kf": t_kf}
-            sol, more = self._refine(problem, sol, ctx)
+            sol, more = self._refine(problem, sol)
             per_run.append(more)
             graph, values, C_kf, iters[r], passes[r] = sol[:5]
             cost[r] = graph.error(values)
@@ -646,19 +715,22 @@ class FactorGraphAligner:
 
 
 class RobustFactorGraphAligner(FactorGraphAligner):
-    """Factor-graph fine alignment with Huber-robust velocity priors (method ``gtsam-robust``).
+    """Factor-graph fine alignment with Huber-robust velocity factors (method ``gtsam-robust``).
 
-    The graph of :class:`FactorGraphAligner`, but each velocity prior uses
-    ``Robust(Huber(huber_k), Isotropic(sigma))``: reference-velocity outliers (noise bursts, base
-    motion the reference does not see) weigh linearly rather than quadratically beyond ``huber_k``
-    sigmas (default 1.345, 95 % efficiency on Gaussian noise). Parameters as for
-    :class:`FactorGraphAligner`. On data whose velocity residuals stay inside the threshold it
-    gives the same result. It is no answer to a change of noise level (all samples noisier, none an
-    outlier): :class:`AdaptiveFactorGraphAligner` is.
+    The graph of :class:`FactorGraphAligner`, but each keyframe's velocity factor is weighted by
+    Huber's M-estimator on the norm of its whitened error (iteratively reweighted, at most 10 graph
+    builds): reference-velocity outliers (noise bursts, base motion the reference does not see)
+    weigh linearly rather than quadratically beyond ``huber_k`` sigmas (default 1.345, 95 %
+    efficiency on Gaussian noise). Parameters as for :class:`FactorGraphAligner`. On data whose
+    velocity errors stay inside the threshold it gives the same result. It keeps its use for
+    outliers: 1 % of the samples of paper001-moving-base 3 m/s off leave it at 1.1 arcmin of
+    azimuth where gtsam has 2.0 and gtsam-adaptive 1.7 (8 runs). A change of noise level (all
+    samples noisier, none an outlier) is :class:`AdaptiveFactorGraphAligner`'s, although a x100
+    variance jump puts a keyframe's errors so many sigmas out that the Huber weight helps there too.
     """
 
     name = "gtsam-robust"
-    description = "factor-graph fine alignment with Huber-robust velocity priors (gtsam)"
+    description = "factor-graph fine alignment with Huber-robust velocity factors (gtsam)"
     robust = True
 
 
@@ -751,9 +823,8 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
         nu = self.adapt_prior_dof
         return np.clip((nu + Es) / np.maximum(nu + Rs, 1e-12), *self.adapt_bounds)
 
-    def _refine(self, problem, sol, ctx):
-        phi, dv, dt, counts, refs, seg, walk = problem
-        t_kf, t_end = ctx["t_kf"], ctx["t_end"]
+    def _refine(self, problem, sol):
+        t_kf, t_end, counts, seg = problem["t_kf"], problem["t_end"], problem["counts"], problem["seg"]
         K = counts.size
         W = max(1, int(round((t_kf[-1] - t_kf[0]) / self.adapt_window_s)))
 
@@ -763,26 +834,27 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
         w_kf, w_int, w_smp = window(t_kf), window(0.5 * (t_kf[1:] + t_kf[:-1])), window(t_end)
         bias_keys = [B(j) for j in range(int(seg.max()) + 1)]
         imu_keys = [[X(k - 1), V(k - 1), X(k), V(k), B(seg[k - 1])] for k in range(1, K)]
-        vel_keys = [[V(k)] for k in range(K)]
+        vel_keys = [[X(k), V(k), B(seg[min(k, K - 2)])] for k in range(K)]
         lam_v, lam_i = np.ones(W), np.ones(W)
         rounds = 0
         for rounds in range(1, self.adapt_iterations + 1):
             graph, values, C_kf = sol[:3]
+            priors = sol[9]
             try:
                 post = Posterior(graph, values, K, bias_keys)
             except (RuntimeError, KeyError, ValueError):
                 break
             e_i, r_i = residual_statistics(post, imu_keys, sol[6])
             e_v, r_v = residual_statistics(post, vel_keys, sol[7])
-            e_v = e_v + refs["rss"] / self.velocity_sigma**2
-            r_v = r_v + refs["dof"]
+            b_acc = np.stack([values.atConstantBias(B(seg[min(k, K - 2)])).accelerometer() for k in range(K)])
+            rss, dof = self._scatter(problem, priors, C_kf, b_acc)
+            e_v = e_v + rss / self.velocity_sigma**2
+            r_v = r_v + dof
             new_i = self._update(lam_i, e_i, r_i, w_int, W)
             new_v = self._update(lam_v, e_v, r_v, w_kf, W)
             change = max(np.abs(np.log(new_i / lam_i)).max(), np.abs(np.log(new_v / lam_v)).max())
             lam_i, lam_v = new_i, new_v
-            refs = {**self._references(ctx["site"], ctx["vref"], t_end, t_kf, counts, dt, weight=1.0 / lam_v[w_smp]),
-                    "C0": refs.get("C0")}
-            problem = (phi, dv, dt, counts, refs, seg, walk)
+            problem = {**problem, "weight": 1.0 / lam_v[w_smp]}
             spent = sol[3]
             sol = self._solve(problem, C_kf, values=values, imu_scale=lam_i[w_int], pims=sol[8])
             sol = sol[:3] + (spent + sol[3],) + sol[4:]

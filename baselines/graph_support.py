@@ -116,63 +116,180 @@ def _propagate(C_known, dR, w_n, T, forward):
     return orthonormalize(out)
 
 
-def tile_fit(t, v, t_kf, weight=None):
-    """Reference samples reduced to one velocity per keyframe: a weighted local linear fit of the
-    samples nearest to each keyframe (its *tile*), evaluated at the keyframe time.
-
-    The tiles split the record at the midpoints between keyframes, so every sample is used once and
-    the fitted values of different keyframes are independent. Inside a tile the fit is exact for a
-    velocity linear in time (a constant acceleration); on a tile centred on its keyframe the value
-    is the weighted mean, at the ends of the record (one-sided tiles) an extrapolation whose
-    variance the fit accounts for.
+def tiles(t, t_kf):
+    """The keyframe nearest to each sample (its *tile*): the record split at the midpoints between
+    keyframes, so every sample belongs to one keyframe.
 
     Parameters
     ----------
     t : ndarray, shape (M,)
         Sample times, s.
-    v : ndarray, shape (M, 3)
-        Samples (ENU velocity, m/s).
     t_kf : ndarray, shape (K,)
         Keyframe times, s, increasing.
-    weight : ndarray, shape (M,), optional
-        Inverse variance of each sample relative to the unit (default all 1).
 
     Returns
     -------
-    value : ndarray, shape (K, 3)
-        Fitted velocity at each keyframe time (zero where a tile is empty).
-    var : ndarray, shape (K,)
-        Variance of ``value`` per unit sample variance (``inf`` where a tile is empty): the prior's
-        sigma is the per-sample sigma times ``sqrt(var)``, ``1/n`` for a centred tile of n samples.
-    rss : ndarray, shape (K,)
-        Weighted residual sum of squares of the fit, summed over the three axes.
-    dof : ndarray, shape (K,)
-        Its degrees of freedom, ``3 (n - 2)`` (zero for fewer than three samples).
-    tile : ndarray of int, shape (M,)
-        The keyframe each sample belongs to.
+    ndarray of int, shape (M,)
     """
+    return np.searchsorted(0.5 * (t_kf[1:] + t_kf[:-1]), t, side="left")
+
+
+def tile_increments(phi, dv, counts, tile):
+    """Each sample's velocity increment resolved in the body frame of its tile's keyframe.
+
+    Parameters
+    ----------
+    phi, dv : ndarray, shape (M, 3)
+        Rotation vectors (rad) and velocity increments (m/s, body frame at the start of each sample) of
+        the samples (:func:`compensated_increments`).
+    counts : ndarray of int, shape (K,)
+        Keyframe sample counts (:func:`keyframe_counts`).
+    tile : ndarray of int, shape (M,)
+        The keyframe of each sample (:func:`tiles`); a sample of the interval between keyframes k-1 and k
+        belongs to one of them.
+
+    Returns
+    -------
+    u : ndarray, shape (M, 3)
+        ``C_{b_k}^{b_i} dv_i``, m/s, with the gyros' rotation from keyframe k to the start of sample i.
+    R : ndarray, shape (M, 3, 3)
+        ``C_{b_k}^{b_i}``.
+    """
+    M = phi.shape[0]
+    starts, lengths = counts[:-1], np.diff(counts)
+    R_start = np.empty((M, 3, 3))
+    Rcur = np.broadcast_to(np.eye(3), (starts.size, 3, 3)).copy()
+    for s in range(int(lengths.max())):
+        sel = lengths > s
+        idx = starts[sel] + s
+        R_start[idx] = Rcur[sel]
+        Rcur[sel] = Rcur[sel] @ rodrigues(phi[idx])
+    interval = np.searchsorted(counts, np.arange(M), side="right") - 1  # sample i in [counts[j], counts[j+1])
+    later = tile == interval + 1  # belongs to the keyframe at the end of its interval
+    R_start[later] = np.swapaxes(Rcur[interval[later]], -1, -2) @ R_start[later]
+    return np.einsum("mij,mj->mi", R_start, dv), R_start
+
+
+def tile_sums(x, tile, counts):
+    """``x`` summed from each sample's keyframe to the sample: over the samples after the keyframe up to
+    and including sample i, or minus those after sample i up to the keyframe's own sample.
+
+    Parameters
+    ----------
+    x : ndarray, shape (M, ...)
+        Per-sample increments (each tile's in its own frame: only a tile's own samples are summed).
+    tile : ndarray of int, shape (M,)
+    counts : ndarray of int, shape (K,)
+        Keyframe sample counts: keyframe k is at the end of sample ``counts[k] - 1`` (k >= 1), keyframe 0
+        at the start of sample 0.
+
+    Returns
+    -------
+    ndarray, shape (M, ...)
+        Zero at a keyframe's own sample.
+    """
+    S = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])  # S[i + 1]: through sample i
+    return S[1:] - S[counts][tile]
+
+
+def tile_means(tile, K, weight, *arrays):
+    """Weighted means over each tile of ``arrays`` (each (M, ...)), and the variance of such a mean per
+    unit sample variance, ``1 / sum w`` (``1/n``; ``inf`` where a tile is empty).
+
+    Returns ``var`` (K,) and one (K, ...) mean per array (zero where a tile is empty).
+    """
+    w = np.ones(tile.size) if weight is None else np.asarray(weight, dtype=float)
+    s0 = np.bincount(tile, w, minlength=K)
+    some = s0 > 0
+    var = np.full(K, np.inf)
+    var[some] = 1.0 / s0[some]
+    out = [var]
+    for a in arrays:
+        flat = a.reshape(a.shape[0], -1)
+        m = np.zeros((K, flat.shape[1]))
+        for i in range(flat.shape[1]):
+            m[some, i] = np.bincount(tile, w * flat[:, i], minlength=K)[some] / s0[some]
+        out.append(m.reshape((K,) + a.shape[1:]))
+    return out
+
+
+def tile_scatter(r, tile, t, t_kf, weight=None):
+    """Weighted residual sum of squares of ``r`` (M, 3) about a linear fit in time over each tile, summed
+    over the axes, and its degrees of freedom ``3 (n - 2)`` (zero for fewer than three samples): the
+    reference's own scatter about what the solution predicts, a slow drift of the prediction (an
+    attitude error) not counted as noise."""
     K = t_kf.size
     w = np.ones(t.size) if weight is None else np.asarray(weight, dtype=float)
-    tile = np.searchsorted(0.5 * (t_kf[1:] + t_kf[:-1]), t, side="left")
     tau = t - t_kf[tile]
     n = np.bincount(tile, minlength=K)
     s0, s1, s2 = (np.bincount(tile, w * tau**p, minlength=K) for p in range(3))
-    y0 = np.stack([np.bincount(tile, w * v[:, i], minlength=K) for i in range(3)], axis=1)
-    y1 = np.stack([np.bincount(tile, w * tau * v[:, i], minlength=K) for i in range(3)], axis=1)
+    y0 = np.stack([np.bincount(tile, w * r[:, i], minlength=K) for i in range(3)], axis=1)
+    y1 = np.stack([np.bincount(tile, w * tau * r[:, i], minlength=K) for i in range(3)], axis=1)
     det = s0 * s2 - s1**2
-    line = (n >= 2) & (det > 1e-12 * np.maximum(s0 * s2, 1e-300))
-    value, var = np.zeros((K, 3)), np.full(K, np.inf)
-    slope = np.zeros((K, 3))
-    value[line] = (s2[line, None] * y0[line] - s1[line, None] * y1[line]) / det[line, None]
-    slope[line] = (s0[line, None] * y1[line] - s1[line, None] * y0[line]) / det[line, None]
-    var[line] = s2[line] / det[line]
-    single = (n >= 1) & ~line
-    value[single] = y0[single] / s0[single, None]
-    var[single] = 1.0 / s0[single]
-    res = v - value[tile] - slope[tile] * tau[:, None]
+    line = (n >= 3) & (det > 1e-12 * np.maximum(s0 * s2, 1e-300))
+    a, b = np.zeros((K, 3)), np.zeros((K, 3))
+    a[line] = (s2[line, None] * y0[line] - s1[line, None] * y1[line]) / det[line, None]
+    b[line] = (s0[line, None] * y1[line] - s1[line, None] * y0[line]) / det[line, None]
+    res = r - a[tile] - b[tile] * tau[:, None]
     rss = np.bincount(tile, w * np.sum(res**2, axis=1), minlength=K)
-    dof = 3 * np.maximum(n - 2, 0)
-    return value, var, rss, dof, tile
+    rss[~line] = 0.0
+    return rss, np.where(line, 3 * (n - 2), 0)
+
+
+def _skew(u):
+    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+
+
+def velocity_error(R, v, b_acc, z, U, Mb):
+    """The velocity factor's error ``v + R (U - Mb b_acc) - z`` (ENU, m/s); arrays broadcast over a
+    leading axis (see :func:`velocity_factor`)."""
+    Ub = U - np.einsum("...ij,...j->...i", Mb, b_acc)
+    return v + np.einsum("...ij,...j->...i", R, Ub) - z
+
+
+def velocity_factor(keys, z, U, Mb, sigma, at):
+    """The velocity factor of one keyframe, ``V + R (U - Mb b_a) = z`` on ``(X, V, B)``, linearised.
+
+    ``z`` (ENU, m/s) is the mean over the keyframe's tile of the reference samples less the part of the
+    velocity change since the keyframe that does not depend on the attitude (gravity, Coriolis); ``U`` the
+    mean of the measured velocity increments from the keyframe to each sample, in the keyframe's body
+    frame (m/s); ``Mb`` (3, 3, s) the mean of the same sums of ``C_{b_k}^{b_j} dt`` (what an accelerometer
+    bias ``b_a`` adds to them); ``R`` the keyframe's attitude ``C_bn``. Each reference sample is so
+    compared with the velocity the IMU predicts at its own time: any motion within the tile is followed,
+    and the attitude and the accelerometer bias enter as they do (the gyro bias's part over half a
+    keyframe interval, ``b_g x f tau^2 / 2``, is neglected: 6e-6 m/s for 1 deg/h over 0.5 s at 1 g).
+
+    The factor is linearised at ``at = (pose, v, b_acc)`` (a ``gtsam.LinearContainerFactor``: all in C++;
+    a Python ``CustomFactor`` made the solve five times slower), with Jacobians ``[-R [(U - Mb b_a) x], 0]``
+    on the pose (gtsam's tangent, rotation then translation, ``R = R_hat Exp(delta)``), ``I`` on V and
+    ``[-R Mb, 0]`` on the bias (gtsam order: accelerometer, gyro). Its error is quadratic in the attitude's
+    move from there (``|U| delta^2 / 2``); the caller relinearises when the attitude moved.
+
+    Parameters
+    ----------
+    keys : (int, int, int)
+        ``X(k)``, ``V(k)``, ``B(j)``.
+    z, U : ndarray, shape (3,)
+    Mb : ndarray, shape (3, 3)
+    sigma : float
+        Noise of ``z``, m/s, each axis.
+    at : (gtsam.Pose3, ndarray, ndarray)
+        Linearisation point: pose, velocity (3,), accelerometer bias (3,).
+    """
+    pose, v, b_acc = at
+    R = pose.rotation().matrix()
+    Ub = U - Mb @ b_acc
+    e0 = v + R @ Ub - z
+    H_x, H_b = np.zeros((3, 6)), np.zeros((3, 6))
+    H_x[:, :3] = -R @ _skew(Ub)
+    H_b[:, :3] = -R @ Mb
+    key_x, key_v, key_b = keys
+    jf = gtsam.JacobianFactor(key_x, H_x, key_v, np.eye(3), key_b, H_b, -e0, gtsam.noiseModel.Isotropic.Sigma(3, sigma))
+    lin = gtsam.Values()
+    lin.insert(key_x, pose)
+    lin.insert(key_v, np.asarray(v, dtype=float))
+    lin.insert(key_b, gtsam.imuBias.ConstantBias(np.asarray(b_acc, dtype=float), np.zeros(3)))
+    return gtsam.LinearContainerFactor(jf, lin)
 
 
 _DIMS = {"x": 6, "v": 3, "b": 6}
