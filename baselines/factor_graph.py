@@ -297,11 +297,13 @@ class FactorGraphAligner:
         Levenberg-Marquardt iteration limit. When it is reached from a given ``init``, the
         recording is solved again from the coarse alignment and the solution of lower cost kept.
     recompensate_rad : float
-        On a moving base, rebuild the graph when the optimised attitude moved by more than this from
-        the attitude used for the transport-rate compensation (rad), unless the compensation is too
-        small for it to matter (angle moved times compensation below 1e-9 m/s^2).
+        Rebuild the graph when the optimised attitude moved by more than this (rad) from the one at
+        which the velocity factors were linearised and, on a moving base, the transport rate
+        compensated (the preintegration is redone only where the compensation matters: angle moved
+        times compensation above 1e-9 m/s^2).
     max_passes : int
-        At most this many graph builds per recording.
+        At most this many graph builds per recording (the robust variant: at least 10, for its
+        reweighting).
     marginals : bool
         Compute ``extra["sigma_phi"]`` and ``extra["sigma_phi_noise"]``.
     huber_k : float
@@ -309,6 +311,12 @@ class FactorGraphAligner:
     coarse : object, optional
         Aligner used when ``init`` is None (default :class:`baselines.coarse.InertialCoarseAligner`,
         which works on a swaying base).
+    init_sigma_deg : float or (3,) float, optional
+        Sigma of a prior on the attitude of ``init`` at the first keyframe, misalignment E, N, U, deg
+        (what a Kalman filter's initial covariance says: ``(1, 1, 5)`` is the Kalman aligner's
+        default). None (default): no prior, ``init`` is only where the solve starts (it may be 180 deg
+        off). Where the east gyro bias's limit is large (tactical grade), the prior decides how the
+        inseparable heading and bias share it.
     """
 
     name = "gtsam"
@@ -440,8 +448,8 @@ class FactorGraphAligner:
         velocity when ``vref_r`` is None); ``tile`` (M,) their keyframes, ``u`` (M, 3) the velocity
         increments in the keyframe body frames (:func:`baselines.graph_support.tile_increments`),
         ``U`` (M, 3) their sums from the keyframe to each sample (m/s) and ``Mb`` (M, 3, 3) the same
-        sums of ``C_{b_k}^{b_j} dt`` (s),
-        ``tau`` (M,) the start of each sample less its keyframe's time, ``w_s`` (M, 3) rad/s and
+        sums of ``C_{b_k}^{b_j} dt`` (s), ``tau`` (M,) the start of each sample less its keyframe's
+        time, ``w_s`` (M, 3) rad/s and
         ``a_s`` (M, 3) m/s^2 the turn rate of ENU and ``g - (2 omega_ie + omega_en) x v`` at each
         sample; ``p_kf`` (K, 3) m (ENU) the integrated reference; ``w_in`` (K-1, 3) rad/s the turn
         rate of ENU over each interval (earth plus transport rate), ``c_n`` (K-1, 3) m/s^2 the
@@ -488,9 +496,8 @@ class FactorGraphAligner:
     def _priors(self, problem, C_kf):
         """The keyframe velocity factors' data (:func:`baselines.graph_support.velocity_factor`): ``z``,
         ``U`` (K, 3) m/s, ``Mb`` (K, 3, 3) s and ``v_var`` (K,) the variance of ``z`` per unit sample
-        variance; ``y`` (M, 3)
-        the samples less the attitude-free part of the predicted velocity change since their keyframe
-        (gravity, Coriolis, and the turn of ENU, small, evaluated with ``C_kf``)."""
+        variance; ``y`` (M, 3) the samples less the attitude-free part of the predicted velocity change
+        since their keyframe (gravity, Coriolis, and the turn of ENU, small, evaluated with ``C_kf``)."""
         pr = problem
         turn = -np.cross(pr["w_s"] * pr["tau"][:, None], np.einsum("mij,mj->mi", C_kf[pr["tile"]], pr["u"]))
         y = pr["v"] - tile_sums(pr["a_s"] * pr["dt"] + turn, pr["tile"], pr["counts"])

@@ -1,7 +1,9 @@
 """Support for the factor-graph aligner (:mod:`baselines.factor_graph`): IMU increments for gtsam,
-keyframe bookkeeping, attitude propagation between keyframes, and the marginal covariance of the
-misalignment from a QR-eliminated Bayes net (``gtsam.Marginals`` factors by Cholesky, which fails on
-these nearly singular graphs).
+keyframe bookkeeping, attitude propagation between keyframes, the reference samples' tiles and the
+velocity factor that compares each sample with the velocity the IMU predicts at its time, the
+posterior covariance from a QR-eliminated Bayes net (``gtsam.Marginals`` factors by Cholesky, which
+fails on these nearly singular graphs), and the residual statistics of variance-component
+estimation.
 
 Frames: navigation ENU, body RFU; angles rad, rates rad/s, velocities m/s.
 """
