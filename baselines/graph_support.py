@@ -1,7 +1,9 @@
 """Support for the factor-graph aligner (:mod:`baselines.factor_graph`): IMU increments for gtsam,
-keyframe bookkeeping, attitude propagation between keyframes, and the marginal covariance of the
-misalignment from a QR-eliminated Bayes net (``gtsam.Marginals`` factors by Cholesky, which fails on
-these nearly singular graphs).
+keyframe bookkeeping, attitude propagation between keyframes, the reference samples' tiles and the
+velocity factor that compares each sample with the velocity the IMU predicts at its time, the
+posterior covariance from a QR-eliminated Bayes net (``gtsam.Marginals`` factors by Cholesky, which
+fails on these nearly singular graphs), and the residual statistics of variance-component
+estimation.
 
 Frames: navigation ENU, body RFU; angles rad, rates rad/s, velocities m/s.
 """
@@ -9,7 +11,6 @@ Frames: navigation ENU, body RFU; angles rad, rates rad/s, velocities m/s.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 import gtsam
 from gtsam.symbol_shorthand import B, V, X
@@ -117,68 +118,365 @@ def _propagate(C_known, dR, w_n, T, forward):
     return orthonormalize(out)
 
 
-def _window_means(x, centres, half):
-    """Mean of ``x`` (M, 3) over windows ``centres +- half`` samples, shrunk symmetrically at the ends."""
-    M = x.shape[0]
-    cs = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
-    h = np.minimum(half, np.minimum(centres, M - 1 - centres))
-    return (cs[centres + h + 1] - cs[centres - h]) / (2 * h + 1)[:, None]
+def tiles(t, t_kf):
+    """The keyframe nearest to each sample (its *tile*): the record split at the midpoints between
+    keyframes, so every sample belongs to one keyframe.
 
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Sample times, s.
+    t_kf : ndarray, shape (K,)
+        Keyframe times, s, increasing.
 
-def marginal_sigmas(graph, values, C_kf):
-    """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias prior, and with the bias known.
-
-    The graph is linearised at the solution and eliminated by QR in the order
-    ``X(0), V(0), X(1), ..., V(K-1), B(0)``: a Bayes net ``p(B) prod p(x_f | parents)`` of
-    unit-noise conditionals ``R x_f + S x_P = d + e``. Backwards from ``B(0)``, with the bias
-    known, ``Sigma_fP = -A Sigma_PP`` and ``Sigma_ff = R^-1 R^-T + A Sigma_PP A^T``
-    (``A = R^-1 S``; each parent set is a clique whose covariances are already known), and the
-    sensitivity to the bias is ``M_f = -A M_P``; with the bias prior,
-    ``Sigma_ff + M_f Sigma_BB M_f^T``. gtsam's Pose3 tangent is [rotation, translation] in the
-    body frame with ``R = R_hat Exp(delta)``; the misalignment is ``phi = -C_bn delta``, so its
-    covariance is ``C_bn S C_bn^T`` with S the rotation block.
+    Returns
+    -------
+    ndarray of int, shape (M,)
     """
-    K = C_kf.shape[0]
-    full, noise = np.full((K, 3), np.nan), np.full((K, 3), np.nan)
-    dims = {"x": 6, "v": 3, "b": 6}
-    try:
-        lin = graph.linearize(values)
+    return np.searchsorted(0.5 * (t_kf[1:] + t_kf[:-1]), t, side="left")
+
+
+def tile_increments(phi, dv, counts, tile):
+    """Each sample's velocity increment resolved in the body frame of its tile's keyframe.
+
+    Parameters
+    ----------
+    phi, dv : ndarray, shape (M, 3)
+        Rotation vectors (rad) and velocity increments (m/s, body frame at the start of each sample) of
+        the samples (:func:`compensated_increments`).
+    counts : ndarray of int, shape (K,)
+        Keyframe sample counts (:func:`keyframe_counts`).
+    tile : ndarray of int, shape (M,)
+        The keyframe of each sample (:func:`tiles`); a sample of the interval between keyframes k-1 and k
+        belongs to one of them.
+
+    Returns
+    -------
+    u : ndarray, shape (M, 3)
+        ``C_{b_k}^{b_i} dv_i``, m/s, with the gyros' rotation from keyframe k to the start of sample i.
+    R : ndarray, shape (M, 3, 3)
+        ``C_{b_k}^{b_i}``.
+    """
+    M = phi.shape[0]
+    starts, lengths = counts[:-1], np.diff(counts)
+    R_start = np.empty((M, 3, 3))
+    Rcur = np.broadcast_to(np.eye(3), (starts.size, 3, 3)).copy()
+    for s in range(int(lengths.max())):
+        sel = lengths > s
+        idx = starts[sel] + s
+        R_start[idx] = Rcur[sel]
+        Rcur[sel] = Rcur[sel] @ rodrigues(phi[idx])
+    interval = np.searchsorted(counts, np.arange(M), side="right") - 1  # sample i in [counts[j], counts[j+1])
+    later = tile == interval + 1  # belongs to the keyframe at the end of its interval
+    R_start[later] = np.swapaxes(Rcur[interval[later]], -1, -2) @ R_start[later]
+    return np.einsum("mij,mj->mi", R_start, dv), R_start
+
+
+def tile_sums(x, tile, counts):
+    """``x`` summed from each sample's keyframe to the sample: over the samples after the keyframe up to
+    and including sample i, or minus those after sample i up to the keyframe's own sample.
+
+    Parameters
+    ----------
+    x : ndarray, shape (M, ...)
+        Per-sample increments (each tile's in its own frame: only a tile's own samples are summed).
+    tile : ndarray of int, shape (M,)
+    counts : ndarray of int, shape (K,)
+        Keyframe sample counts: keyframe k is at the end of sample ``counts[k] - 1`` (k >= 1), keyframe 0
+        at the start of sample 0.
+
+    Returns
+    -------
+    ndarray, shape (M, ...)
+        Zero at a keyframe's own sample.
+    """
+    S = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])  # S[i + 1]: through sample i
+    return S[1:] - S[counts][tile]
+
+
+def tile_means(tile, K, weight, *arrays):
+    """Weighted means over each tile of ``arrays`` (each (M, ...)), and the variance of such a mean per
+    unit sample variance, ``1 / sum w`` (``1/n``; ``inf`` where a tile is empty).
+
+    Returns ``var`` (K,) and one (K, ...) mean per array (zero where a tile is empty).
+    """
+    w = np.ones(tile.size) if weight is None else np.asarray(weight, dtype=float)
+    s0 = np.bincount(tile, w, minlength=K)
+    some = s0 > 0
+    var = np.full(K, np.inf)
+    var[some] = 1.0 / s0[some]
+    out = [var]
+    for a in arrays:
+        flat = a.reshape(a.shape[0], -1)
+        m = np.zeros((K, flat.shape[1]))
+        for i in range(flat.shape[1]):
+            m[some, i] = np.bincount(tile, w * flat[:, i], minlength=K)[some] / s0[some]
+        out.append(m.reshape((K,) + a.shape[1:]))
+    return out
+
+
+def tile_scatter(r, tile, t, t_kf, weight=None):
+    """Weighted residual sum of squares of ``r`` (M, 3) about a linear fit in time over each tile, summed
+    over the axes, and its degrees of freedom ``3 (n - 2)`` (zero for fewer than three samples): the
+    reference's own scatter about what the solution predicts, a slow drift of the prediction (an
+    attitude error) not counted as noise."""
+    K = t_kf.size
+    w = np.ones(t.size) if weight is None else np.asarray(weight, dtype=float)
+    tau = t - t_kf[tile]
+    n = np.bincount(tile, minlength=K)
+    s0, s1, s2 = (np.bincount(tile, w * tau**p, minlength=K) for p in range(3))
+    y0 = np.stack([np.bincount(tile, w * r[:, i], minlength=K) for i in range(3)], axis=1)
+    y1 = np.stack([np.bincount(tile, w * tau * r[:, i], minlength=K) for i in range(3)], axis=1)
+    det = s0 * s2 - s1**2
+    line = (n >= 3) & (det > 1e-12 * np.maximum(s0 * s2, 1e-300))
+    a, b = np.zeros((K, 3)), np.zeros((K, 3))
+    a[line] = (s2[line, None] * y0[line] - s1[line, None] * y1[line]) / det[line, None]
+    b[line] = (s0[line, None] * y1[line] - s1[line, None] * y0[line]) / det[line, None]
+    res = r - a[tile] - b[tile] * tau[:, None]
+    rss = np.bincount(tile, w * np.sum(res**2, axis=1), minlength=K)
+    rss[~line] = 0.0
+    return rss, np.where(line, 3 * (n - 2), 0)
+
+
+def _skew(u):
+    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+
+
+def velocity_error(R, v, b_acc, z, U, Mb):
+    """The velocity factor's error ``v + R (U - Mb b_acc) - z`` (ENU, m/s); arrays broadcast over a
+    leading axis (see :func:`velocity_factor`)."""
+    Ub = U - np.einsum("...ij,...j->...i", Mb, b_acc)
+    return v + np.einsum("...ij,...j->...i", R, Ub) - z
+
+
+def velocity_factor(keys, z, U, Mb, sigma, at):
+    """The velocity factor of one keyframe, ``V + R (U - Mb b_a) = z`` on ``(X, V, B)``, linearised.
+
+    ``z`` (ENU, m/s) is the mean over the keyframe's tile of the reference samples less the part of the
+    velocity change since the keyframe that does not depend on the attitude (gravity, Coriolis); ``U`` the
+    mean of the measured velocity increments from the keyframe to each sample, in the keyframe's body
+    frame (m/s); ``Mb`` (3, 3, s) the mean of the same sums of ``C_{b_k}^{b_j} dt`` (what an accelerometer
+    bias ``b_a`` adds to them); ``R`` the keyframe's attitude ``C_bn``. Each reference sample is so
+    compared with the velocity the IMU predicts at its own time: any motion within the tile is followed,
+    and the attitude and the accelerometer bias enter as they do (the gyro bias's part over half a
+    keyframe interval, ``b_g x f tau^2 / 2``, is neglected: 6e-6 m/s for 1 deg/h over 0.5 s at 1 g).
+
+    The factor is linearised at ``at = (pose, v, b_acc)`` (a ``gtsam.LinearContainerFactor``: all in C++;
+    a Python ``CustomFactor`` made the solve five times slower), with Jacobians ``[-R [(U - Mb b_a) x], 0]``
+    on the pose (gtsam's tangent, rotation then translation, ``R = R_hat Exp(delta)``), ``I`` on V and
+    ``[-R Mb, 0]`` on the bias (gtsam order: accelerometer, gyro). Its error is quadratic in the attitude's
+    move from there (``|U| delta^2 / 2``); the caller relinearises when the attitude moved.
+
+    Parameters
+    ----------
+    keys : (int, int, int)
+        ``X(k)``, ``V(k)``, ``B(j)``.
+    z, U : ndarray, shape (3,)
+    Mb : ndarray, shape (3, 3)
+    sigma : float
+        Noise of ``z``, m/s, each axis.
+    at : (gtsam.Pose3, ndarray, ndarray)
+        Linearisation point: pose, velocity (3,), accelerometer bias (3,).
+    """
+    pose, v, b_acc = at
+    R = pose.rotation().matrix()
+    Ub = U - Mb @ b_acc
+    e0 = v + R @ Ub - z
+    H_x, H_b = np.zeros((3, 6)), np.zeros((3, 6))
+    H_x[:, :3] = -R @ _skew(Ub)
+    H_b[:, :3] = -R @ Mb
+    key_x, key_v, key_b = keys
+    jf = gtsam.JacobianFactor(key_x, H_x, key_v, np.eye(3), key_b, H_b, -e0, gtsam.noiseModel.Isotropic.Sigma(3, sigma))
+    lin = gtsam.Values()
+    lin.insert(key_x, pose)
+    lin.insert(key_v, np.asarray(v, dtype=float))
+    lin.insert(key_b, gtsam.imuBias.ConstantBias(np.asarray(b_acc, dtype=float), np.zeros(3)))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+_DIMS = {"x": 6, "v": 3, "b": 6}
+_KEY_DIMS = {}
+
+
+def _dim(key):
+    """Tangent dimension of a key (Pose3 6, velocity 3, bias 6)."""
+    d = _KEY_DIMS.get(key)
+    if d is None:
+        d = _KEY_DIMS[key] = _DIMS[chr(gtsam.Symbol(key).chr())]
+    return d
+
+
+def _offsets(keys):
+    """Start of each key's block in a stacked tangent vector, and the total size, as ints."""
+    off = [0]
+    for k in keys:
+        off.append(off[-1] + _dim(k))
+    return off
+
+
+class Posterior:
+    """The Gaussian posterior of a keyframe graph linearised at its solution.
+
+    The graph is eliminated by QR in the order ``X(0), V(0), X(1), ..., V(K-1)`` and then the bias
+    keys: a Bayes net ``p(B) prod p(x_f | parents)`` of unit-noise conditionals
+    ``R x_f + S x_P = d + e``. Backwards, first over the bias keys (their joint covariance
+    ``S_bb``), then, with the biases known, ``Sigma_fP = -A Sigma_PP`` and
+    ``Sigma_ff = R^-1 R^-T + A Sigma_PP A^T`` (``A = R^-1 S``; each parent set is a clique whose
+    covariances are already known) together with the sensitivity to the biases ``M_f = -A M_P``.
+    The covariance of keys a, b is then ``Sigma_ab + M_a S_bb M_b^T`` (with the bias priors) or
+    ``Sigma_ab`` (biases known). Linear in K; ``gtsam.Marginals`` factors by Cholesky, which fails
+    on these nearly singular graphs. Covariances are in gtsam's tangent spaces (Pose3: rotation then
+    translation, body frame, ``R = R_hat Exp(delta)``).
+
+    Parameters
+    ----------
+    graph : gtsam.NonlinearFactorGraph
+    values : gtsam.Values
+    K : int
+        Number of keyframes (keys ``X(k)``, ``V(k)``).
+    bias_keys : sequence of int
+        The bias keys, in time order.
+
+    Raises
+    ------
+    RuntimeError
+        When gtsam cannot eliminate the graph.
+    """
+
+    def __init__(self, graph, values, K, bias_keys):
+        self.lin = graph.linearize(values)
         order = gtsam.Ordering()
         for k in range(K):
             order.push_back(X(k))
             order.push_back(V(k))
-        order.push_back(B(0))
-        net = lin.eliminateSequential(order, gtsam.EliminateQR)
-        cov, sens = {}, {}
+        for b in bias_keys:
+            order.push_back(b)
+        net = self.lin.eliminateSequential(order, gtsam.EliminateQR)
+        nb = len(bias_keys)
+        self.bias_keys = list(bias_keys)
+        sel = {b: np.zeros((6, 6 * nb)) for b in bias_keys}
+        for j, b in enumerate(bias_keys):
+            sel[b][:, 6 * j:6 * j + 6] = np.eye(6)
+        cov, sens, cov_b = {}, dict(sel), {}
         for i in range(net.size() - 1, -1, -1):
             c = net.at(i)
-            model = c.get_model()
-            if model is not None and not np.allclose(model.sigmas(), 1.0):
-                raise RuntimeError("non-unit conditional")
             keys = list(c.keys())
             f, parents = keys[0], keys[1:]
-            Ri = solve_triangular(c.R(), np.eye(c.R().shape[0]))
-            if not parents:  # the bias
-                cov[f, f], sens[f], S_bb = np.zeros((6, 6)), np.eye(6), Ri @ Ri.T
+            # R is upper triangular, 3x3 or 6x6: scipy's solve_triangular costs milliseconds per call when
+            # its threaded BLAS competes for the cores, numpy's inverse 0.03 ms
+            R_inv = np.linalg.inv(c.R())
+            A = R_inv @ c.S() if parents else None
+            model = c.get_model()
+            # the noise of R x_f + S x_P = d: unit, or the sigmas of a diagonal model left on it (by a
+            # constrained factor); then cov(x_f | x_P) = R^-1 diag(sigma^2) R^-T
+            Ri = R_inv if model is None else R_inv * model.sigmas()[None, :]
+            if f in sel:  # a bias key: joint covariance of the biases
+                if parents:
+                    P = self._assemble(cov_b, parents)
+                    cross = -A @ P
+                    cov_b[f, f] = Ri @ Ri.T - cross @ A.T
+                    off = _offsets(parents)
+                    for j, p in enumerate(parents):
+                        cov_b[f, p] = cross[:, off[j]:off[j + 1]]
+                else:
+                    cov_b[f, f] = Ri @ Ri.T
                 continue
-            sizes = [dims[chr(gtsam.Symbol(p).chr())] for p in parents]
-            off = np.cumsum([0] + sizes)
-            P = np.empty((off[-1], off[-1]))
-            for a, pa in enumerate(parents):
-                for b, pb in enumerate(parents):
-                    P[off[a]:off[a + 1], off[b]:off[b + 1]] = cov[pa, pb] if (pa, pb) in cov else cov[pb, pa].T
-            A = Ri @ c.S()
+            P = self._assemble(cov, parents)
             cross = -A @ P
             cov[f, f] = Ri @ Ri.T - cross @ A.T
+            off = _offsets(parents)
             for j, p in enumerate(parents):
-                cov[f, p] = cross[:, off[j]:off[j + 1]]
+                if p not in sel:
+                    cov[f, p] = cross[:, off[j]:off[j + 1]]
             sens[f] = -A @ np.vstack([sens[p] for p in parents])
+        self._cov, self._sens = cov, sens
+        self.S_bb = self._assemble(cov_b, self.bias_keys) if nb else np.zeros((0, 0))
+
+    @staticmethod
+    def _assemble(cov, keys):
+        off = _offsets(keys)
+        P = np.zeros((off[-1], off[-1]))
+        for a, ka in enumerate(keys):
+            for b, kb in enumerate(keys):
+                if (ka, kb) in cov:
+                    blk = cov[ka, kb]
+                elif (kb, ka) in cov:
+                    blk = cov[kb, ka].T
+                else:  # a bias key in the noise-only covariance, or keys never in one clique
+                    continue
+                P[off[a]:off[a + 1], off[b]:off[b + 1]] = blk
+        return P
+
+    def cov(self, keys, bias=True):
+        """Joint covariance of ``keys`` (which must lie in one clique: a factor's keys do), with the
+        bias priors (``bias=True``) or with the biases known."""
+        P = self._assemble(self._cov, keys)
+        if bias and self.bias_keys:
+            M = np.vstack([self._sens[k] for k in keys])
+            P = P + M @ self.S_bb @ M.T
+        return P
+
+    def attitude_sigmas(self, C_kf):
+        """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias priors, and with the biases
+        known. The misalignment is ``phi = -C_bn delta`` (delta the rotation part of the Pose3
+        tangent), so its covariance is ``C_bn S C_bn^T``."""
+        K = C_kf.shape[0]
+        full, noise = np.empty((K, 3)), np.empty((K, 3))
         for k in range(K):
             C = C_kf[k]
-            S_noise = cov[X(k), X(k)][:3, :3]
-            M = sens[X(k)][:3]
+            S_noise = self._cov[X(k), X(k)][:3, :3]
+            M = self._sens[X(k)][:3]
             noise[k] = np.sqrt(np.clip(np.diag(C @ S_noise @ C.T), 0.0, None))
-            full[k] = np.sqrt(np.clip(np.diag(C @ (S_noise + M @ S_bb @ M.T) @ C.T), 0.0, None))
+            full[k] = np.sqrt(np.clip(np.diag(C @ (S_noise + M @ self.S_bb @ M.T) @ C.T), 0.0, None))
+        return full, noise
+
+
+def marginal_sigmas(graph, values, C_kf, bias_keys=None):
+    """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias priors, and with the biases
+    known (NaN when the graph cannot be eliminated). ``bias_keys`` default: ``[B(0)]``, one constant
+    bias. See :class:`Posterior`."""
+    K = C_kf.shape[0]
+    bias_keys = [B(0)] if bias_keys is None else bias_keys
+    try:
+        return Posterior(graph, values, K, bias_keys).attitude_sigmas(C_kf)
     except (RuntimeError, KeyError, ValueError):
-        pass
-    return full, noise
+        return np.full((K, 3), np.nan), np.full((K, 3), np.nan)
+
+
+def residual_statistics(post, factor_keys, factor_index):
+    """Whitened squared residuals and redundancy numbers of factors, for variance-component estimation.
+
+    For a factor with whitened Jacobian ``A`` and whitened residual ``b`` at the solution (``m`` rows)
+    and the posterior covariance ``Sigma`` of its keys, ``E[b^T b] = m - tr(A Sigma A^T)`` when the
+    factor's covariance is right: the redundancy number, the share of the factor's rows that the rest
+    of the graph checks. A group of factors whose covariance is ``lambda`` times the assumed one has
+    ``E[sum b^T b] = lambda sum r``, which is what the adaptive graph solves for.
+
+    Parameters
+    ----------
+    post : Posterior
+        The linearised, eliminated graph (its ``lin`` keeps the factor order of the graph).
+    factor_keys : sequence of sequences of int
+        The keys of each factor, in the factor's own key order.
+    factor_index : sequence of int
+        The factors' indices in the graph (negative: skipped, zeros returned).
+
+    Returns
+    -------
+    e2, red : ndarray, each (len(factor_index),)
+        ``b^T b`` and ``m - tr(A Sigma A^T)``.
+    """
+    n = len(factor_index)
+    e2, red = np.zeros(n), np.zeros(n)
+    for i, (keys, idx) in enumerate(zip(factor_keys, factor_index)):
+        if idx < 0:
+            continue
+        lf = post.lin.at(int(idx))
+        A, b = lf.jacobian()
+        lin_keys = list(lf.keys())
+        if lin_keys != list(keys):
+            raise RuntimeError("factor keys out of order")
+        S = post.cov(lin_keys)
+        e2[i] = float(b @ b)
+        red[i] = A.shape[0] - float(np.einsum("ij,jk,ik->", A, S, A))
+    return e2, red
