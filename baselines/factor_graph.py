@@ -35,9 +35,9 @@ intervals long). Each keyframe has a pose ``X(k)`` (``C_bn``, position) and a ve
   and the within-tile accelerations inform the attitude as in a Kalman filter's updates. The factor
   is linearised at the current solution (a ``LinearContainerFactor``, in C++) and relinearised
   until the attitude moves by less than ``recompensate_rad``. On a stationary base without a
-  reference (``vref=None``) the samples are zero-velocity pseudo-measurements. ``velocity_sigma``
+  reference (``vref=None``) the samples are zero-velocity pseudo-measurements. ``vref_sigma``
   is the noise of **one sample**, independent between samples: the factor's sigma is
-  ``velocity_sigma / sqrt(n)`` for n samples. In ``gtsam-robust`` it carries Huber weights
+  ``vref_sigma / sqrt(n)`` for n samples. In ``gtsam-robust`` it carries Huber weights
   (iteratively reweighted: 1 within ``huber_k`` sigmas of the whitened error's norm).
 * a loose position prior (``GPSFactor``, ``position_sigma``) on ``X(0)`` only; it fixes the
   otherwise free position. The integrated reference is a function of the same samples as the
@@ -82,7 +82,7 @@ Why (measured)
 paper001-moving-base (0.1 g east, 10 Hz, reference 0.1 m/s per sample, seed001 gyro with
 2.6e-5 deg/sqrt(h) and 0.01 deg/h, 20 runs x 500 s): final azimuth error rms / spread about the
 mean / predicted sigma with the bias known, arcmin. The earlier graph (seed000 noise, priors
-0.1 deg/h and 100 ug, one prior of sigma ``velocity_sigma`` per keyframe, position priors on
+0.1 deg/h and 100 ug, one prior of sigma ``vref_sigma`` per keyframe, position priors on
 every keyframe): 3.86 / 3.75 / 2.56 (``kf``: 0.99 / 0.60). The bias priors from the IMU model
 alone: 1.19 / 0.70; with its noise densities too: 0.93 / 0.59 / 0.43; with every sample weighted:
 0.91 / 0.68 / 0.36; without the position priors (this graph): 0.95 / 0.53 / 0.55, the sigma now
@@ -181,9 +181,9 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth, units
-from fusionbench.aligner import AlignmentResult, Site, initial_attitude
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, initial_attitude
 from fusionbench.attitude import dcm_to_rotvec, orthonormalize
-from fusionbench.imu import IMUSpec
+from fusionbench.imu import IMUSpec, load_spec
 from fusionbench.imudata import IMUData
 
 from .coarse import InertialCoarseAligner
@@ -264,10 +264,12 @@ class FactorGraphAligner:
     ----------
     keyframe_s : float
         Keyframe interval, s (default 1 s).
-    imu : IMUSpec, optional
-        The sensor model (:class:`fusionbench.imu.IMUSpec`) from which the white-noise densities, the
-        bias priors and the bias random walk come (:func:`noise_model`); its noise schedules are not
-        used (a change of noise level is what :class:`AdaptiveFactorGraphAligner` estimates). None:
+    imu : str, path, IMUSpec or None
+        The sensor model (a preset name, an IMU spec TOML file or an IMUSpec, :func:`fusionbench.imu.load_spec`;
+        default the ``navigation`` preset) from which the white-noise densities, the bias priors and the bias
+        random walk come (:func:`noise_model`); its noise schedules are not used (a change of noise level is
+        what :class:`AdaptiveFactorGraphAligner` estimates). An IMU whose gyro bias hides the earth rate is
+        refused (:func:`fusionbench.aligner.check_azimuth_observable`). None:
         seed000's white noise, bias priors 0.1 deg/h and 100 ug, a constant bias. Its name is
         reported as ``extra["imu_model"]``.
     gyro_noise : float or (3,) float, optional
@@ -279,10 +281,10 @@ class FactorGraphAligner:
         than the sensor's bias (module docstring).
     accel_bias_sigma : float or (3,) float, optional
         Sigma of the zero-mean accelerometer-bias prior, m/s^2; overrides the model's.
-    velocity_sigma : float
+    vref_sigma : float
         Noise of one reference sample, m/s, each ENU axis, independent between samples (or of the
         zero-velocity assumption at each sample when ``vref`` is None). Each keyframe's velocity
-        factor holds the n samples of its tile, with sigma ``velocity_sigma / sqrt(n)`` (module
+        factor holds the n samples of its tile, with sigma ``vref_sigma / sqrt(n)`` (module
         docstring).
     position_sigma : float
         Sigma of the loose position prior on the first keyframe, m (it only fixes the otherwise free
@@ -325,20 +327,22 @@ class FactorGraphAligner:
     robust = False
     #: A smoother: the estimate at every keyframe uses the whole record.
     causal = False
+    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)
     #: Keys of the per-recording extras that are the same for every recording (kept once).
     _shared_extra = ("adapt_window_t",)
 
-    def __init__(self, keyframe_s=1.0, imu=None, gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
-                 accel_bias_sigma=None, velocity_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
+    def __init__(self, keyframe_s=1.0, imu="navigation", gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
+                 accel_bias_sigma=None, vref_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
                  bias_interval_s=None, max_iterations=100, recompensate_rad=1e-3, max_passes=3, marginals=True,
                  huber_k=1.345, coarse=None, init_sigma_deg=None):
-        positive = dict(keyframe_s=keyframe_s, velocity_sigma=velocity_sigma, position_sigma=position_sigma,
+        positive = dict(keyframe_s=keyframe_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
                         integration_sigma=integration_sigma, recompensate_rad=recompensate_rad, huber_k=huber_k,
                         bias_interval_s=30.0 if bias_interval_s is None else bias_interval_s)
         for key, val in positive.items():
             setattr(self, key, self._positive(key, val))
-        model = noise_model(imu)
-        self.imu = imu
+        self.spec = None if imu is None else load_spec(imu)
+        model = noise_model(self.spec)
+        self.imu = self.spec
         self.imu_model = model.pop("name")
         given = dict(gyro_noise=gyro_noise, accel_noise=accel_noise, gyro_bias_sigma=gyro_bias_sigma,
                      accel_bias_sigma=accel_bias_sigma)
@@ -370,6 +374,7 @@ class FactorGraphAligner:
 
     # ------------------------------------------------------------------------------------ checks
     def _check(self, imu, site, vref, init):
+        check_azimuth_observable(self.spec, site, self.name)
         if not isinstance(imu, IMUData):
             raise ValueError(f"imu: expected an IMUData, found {type(imu).__name__}")
         if not np.isfinite(site.lat) or abs(site.lat) > np.radians(MAX_LATITUDE_DEG):
@@ -418,7 +423,7 @@ class FactorGraphAligner:
         v = np.stack([values.atVector(V(k)) for k in range(K)])
         b = np.stack([values.atConstantBias(B(seg[min(k, K - 2)])).accelerometer() for k in range(K)])
         e = velocity_error(R, v, b, priors["z"], priors["U"], priors["Mb"])
-        r = np.linalg.norm(e, axis=1) / (self.velocity_sigma * np.sqrt(priors["v_var"]))
+        r = np.linalg.norm(e, axis=1) / (self.vref_sigma * np.sqrt(priors["v_var"]))
         return np.where(r <= self.huber_k, 1.0, self.huber_k / np.maximum(r, 1e-300))
 
     def _params(self, g, omega):
@@ -556,7 +561,7 @@ class FactorGraphAligner:
                 f = f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.Covariance(cov))
             imu_idx[k - 1] = graph.size()
             graph.add(f)
-        sig_v = self.velocity_sigma * np.sqrt(priors["v_var"] / (1.0 if huber is None else huber))
+        sig_v = self.vref_sigma * np.sqrt(priors["v_var"] / (1.0 if huber is None else huber))
         for k in range(K):
             if np.isfinite(sig_v[k]):
                 vel_idx[k] = graph.size()
@@ -649,7 +654,7 @@ class FactorGraphAligner:
             Latitude (|lat| <= 89 deg), longitude, height.
         vref : ndarray, shape (R, M, 3) or (M, 3), optional
             Reference velocity, ENU, m/s, at the ends of the increment intervals
-            (``imu.increments()[0]``), each sample with noise ``velocity_sigma``; None for a
+            (``imu.increments()[0]``), each sample with noise ``vref_sigma``; None for a
             stationary base (zero velocity).
         init : ndarray, shape (R, 3, 3) or (3, 3), optional
             Initial guess of ``C_bn`` at the first keyframe (the initial state, ``imu.t0``), carried
@@ -793,7 +798,7 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
         As for :class:`FactorGraphAligner`.
 
     ``extra`` adds ``reference_variance_scale`` and ``imu_variance_scale`` (R, W), the final variance
-    factors of the W windows (square roots: the noise sigma relative to ``velocity_sigma`` and to
+    factors of the W windows (square roots: the noise sigma relative to ``vref_sigma`` and to
     the IMU model), ``adapt_window_t`` (W,) the windows' centres, s, and ``adapt_rounds`` (R,).
     """
 
@@ -802,8 +807,8 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
                    "variance-component estimation)")
 
     def __init__(self, adapt_window_s=10.0, adapt_iterations=6, adapt_tol=0.05, adapt_smooth=5, adapt_min_dof=10.0,
-                 adapt_prior_dof=10.0, adapt_bounds=(1e-2, 1e4), **kw):
-        super().__init__(**kw)
+                 adapt_prior_dof=10.0, adapt_bounds=(1e-2, 1e4), imu="navigation", vref_sigma=0.01, **kw):
+        super().__init__(imu=imu, vref_sigma=vref_sigma, **kw)
         self.adapt_min_dof = float(adapt_min_dof)
         self.adapt_window_s = self._positive("adapt_window_s", adapt_window_s)
         self.adapt_tol = self._positive("adapt_tol", adapt_tol)
@@ -866,7 +871,7 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
             e_v, r_v = residual_statistics(post, vel_keys, sol[7])
             b_acc = np.stack([values.atConstantBias(B(seg[min(k, K - 2)])).accelerometer() for k in range(K)])
             rss, dof = self._scatter(problem, priors, C_kf, b_acc)
-            e_v = e_v + rss / self.velocity_sigma**2
+            e_v = e_v + rss / self.vref_sigma**2
             r_v = r_v + dof
             new_i = self._update(lam_i, e_i, r_i, w_int, W)
             new_v = self._update(lam_v, e_v, r_v, w_kf, W)

@@ -39,9 +39,11 @@ def test_the_noise_figures_come_from_the_imu_model_and_explicit_figures_override
     fg = FactorGraphAligner(imu=tac, gyro_bias_sigma=2 * units.DEG_PER_H)
     assert fg.gyro_bias_sigma == pytest.approx(2 * units.DEG_PER_H)  # explicit figure wins
     assert fg.accel_bias_sigma == pytest.approx(np.hypot(300.0, 50.0) * units.UG)
-    none = FactorGraphAligner()
+    none = FactorGraphAligner(imu=None)  # no model: the seed000-based figures of earlier versions
     assert (none.gyro_noise, none.gyro_bias_sigma, none.imu_model) == pytest.approx(
         (0.005 * units.DEG_PER_SQRT_H, 0.1 * units.DEG_PER_H, "default"))
+    default = FactorGraphAligner()  # the stated default, like the Kalman aligner's: the navigation preset
+    assert default.imu_model == "navigation" and default.gyro_noise == pytest.approx(0.002 * units.DEG_PER_SQRT_H)
     # a walking bias is held over 30-s segments tied by random-walk factors of sigma sqrt(q T_b)
     seg, walk = fg._bias_segments(np.arange(0.0, 301.0))
     assert seg.max() == 9 and np.bincount(seg).tolist() == [30] * 10
@@ -202,8 +204,8 @@ def moving_base_runs():
     data = simulate(traj, scn.imu_spec, scn.dt, runs=12, seed=1)
     vref = simulate_vref(traj, scn.vref_spec, data.increments()[0], runs=12, seed=1)
     init = scn.initial_guess(traj.truth([0.0]).C_bn[0])
-    kf = KalmanAligner(imu="seed001", vel_sigma=0.1).align(data, scn.site, vref=vref, init=init)
-    fg = FactorGraphAligner(imu=scn.imu_spec, velocity_sigma=0.1).align(data, scn.site, vref=vref, init=init)
+    kf = KalmanAligner(imu="seed001", vref_sigma=0.1).align(data, scn.site, vref=vref, init=init)
+    fg = FactorGraphAligner(imu=scn.imu_spec, vref_sigma=0.1).align(data, scn.site, vref=vref, init=init)
     C_end = traj.truth([300.0]).C_bn[0]
     err = {name: np.stack([attitude.misalignment(C, C_end) for C in res.C_bn_final]) for name, res in
            (("kf", kf), ("gtsam", fg))}
@@ -243,7 +245,7 @@ def test_an_attitude_prior_on_init_enters_with_its_weight_like_the_kalman_filter
     s_eps = 1 * units.DEG_PER_H / (earth.OMEGA_IE * np.cos(LAT))  # the bias prior, as an angle
     for s_az in (1.0, 5.0):
         fg = FactorGraphAligner(imu=spec, init_sigma_deg=(1.0, 1.0, s_az)).align(data, site, init=guess)
-        kf = KalmanAligner(imu=spec, vel_sigma=0.01, att_sigma_deg=(1.0, 1.0, s_az)).align(data, site, init=guess)
+        kf = KalmanAligner(imu=spec, vref_sigma=0.01, att_sigma_deg=(1.0, 1.0, s_az)).align(data, site, init=guess)
         s_p = np.radians(s_az)
         # the marginal: prior and bias prior combined, 1 / sqrt(1/s_p^2 + 1/s_eps^2)
         assert fg.extra["sigma_phi"][0, -1, 2] == pytest.approx(1 / np.sqrt(s_p**-2 + s_eps**-2), rel=0.02)
@@ -260,7 +262,7 @@ def test_the_adaptive_graph_finds_the_reference_variance_jump_of_seed001():
     data = simulate(traj, scn.imu_spec, scn.dt, runs=1, seed=4)
     vref = simulate_vref(traj, scn.vref_spec, data.increments()[0], runs=1, seed=4)
     init = scn.initial_guess(traj.truth([0.0]).C_bn[0])
-    fg = AdaptiveFactorGraphAligner(imu=replace(scn.imu_spec, schedules=()), velocity_sigma=0.1)
+    fg = AdaptiveFactorGraphAligner(imu=replace(scn.imu_spec, schedules=()), vref_sigma=0.1)
     res = fg.align(data, scn.site, vref=vref, init=init)
     t, lam = res.extra["adapt_window_t"], res.extra["reference_variance_scale"][0]
     inside, outside = (t > 210) & (t < 390), (t < 190) | (t > 410)
