@@ -52,8 +52,9 @@ def test_the_noise_figures_come_from_the_imu_model_and_explicit_figures_override
     assert seg.max() == 0 and not walk.any()  # a constant bias
     for cls in (FactorGraphAligner, RobustFactorGraphAligner, AdaptiveFactorGraphAligner):
         assert cls.causal is False
+    assert FactorGraphAligner(imu="seed000").imu_model == "seed000"  # a preset name, like the Kalman aligner
     with pytest.raises(ValueError, match="imu"):
-        FactorGraphAligner(imu="seed000")
+        FactorGraphAligner(imu="hal9000")
 
 
 def test_tiles_split_the_samples_between_the_nearest_keyframes_and_their_sums_run_from_the_keyframe():
