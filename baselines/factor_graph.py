@@ -194,6 +194,8 @@ from .graph_support import (Posterior, _interval_rotations, _propagate, compensa
 __all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "AdaptiveFactorGraphAligner", "keyframe_counts",
            "compensated_increments", "MAX_LATITUDE_DEG", "noise_model"]
 
+#: Smallest reference noise used, m/s: an exact reference still gives well-conditioned velocity factors.
+VREF_SIGMA_FLOOR = 1e-3
 #: Highest |latitude| accepted, deg: the horizontal earth rate W cos(L) that sets the heading vanishes at the poles.
 MAX_LATITUDE_DEG = 89.0
 
@@ -283,7 +285,8 @@ class FactorGraphAligner:
         Sigma of the zero-mean accelerometer-bias prior, m/s^2; overrides the model's.
     vref_sigma : float
         Noise of one reference sample, m/s, each ENU axis, independent between samples (or of the
-        zero-velocity assumption at each sample when ``vref`` is None). Each keyframe's velocity
+        zero-velocity assumption at each sample when ``vref`` is None); floored at 1 mm/s (an exact
+        reference). A scenario gives the graph its reference's noise. Each keyframe's velocity
         factor holds the n samples of its tile, with sigma ``vref_sigma / sqrt(n)`` (module
         docstring).
     position_sigma : float
@@ -335,6 +338,9 @@ class FactorGraphAligner:
                  accel_bias_sigma=None, vref_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
                  bias_interval_s=None, max_iterations=100, recompensate_rad=1e-3, max_passes=3, marginals=True,
                  huber_k=1.345, coarse=None, init_sigma_deg=None):
+        if not (isinstance(vref_sigma, (int, float)) and np.isfinite(vref_sigma) and vref_sigma >= 0):
+            raise ValueError(f"vref_sigma: expected a non-negative standard deviation in m/s, found {vref_sigma!r}")
+        vref_sigma = max(float(vref_sigma), VREF_SIGMA_FLOOR)  # an exact reference: a well-conditioned factor
         positive = dict(keyframe_s=keyframe_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
                         integration_sigma=integration_sigma, recompensate_rad=recompensate_rad, huber_k=huber_k,
                         bias_interval_s=30.0 if bias_interval_s is None else bias_interval_s)
