@@ -256,7 +256,7 @@ def _cell(matrix, cond, name, out, bound):
     eff = float(rms[2] * units.ARCMIN / bound[2])
     cell = {"refused": False, "efficiency_U": eff, "efficiency_max": matrix.threshold(name),
             "final_minus_limit_rms_arcmin": _axes(rms), "bound_arcmin": _axes(bound / units.ARCMIN),
-            "settling_mean_s": float(np.mean(oc.extra["settle"])),
+            "settling_mean_s": float(np.nanmean(oc.extra["settle"])),
             "settled_fraction": float(np.mean(oc.extra["settled"])), "wall_s": float(oc.wall_s)}
     if cond.expect == "refuse":
         cell.update(status="fail", message="gave a heading where the azimuth is unobservable")

@@ -245,3 +245,23 @@ def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(t
     assert np.all(out.outcomes[smoother].extra["settled"])
     # the causal method measured on its own (denser) history settles no earlier than on the 25-s grid
     assert np.all(out.outcomes["coarse"].extra["settle"] >= expect - 25.0)
+
+
+def test_smoother_settling_on_the_first_runs_whatever_the_batching(tmp_path):
+    """A smoother's prefix settling is measured on the seed's first PREFIX_RUNS runs only (each costs about five
+    whole-record alignments): the same runs, the same figures, for any batch size; the others are NaN and the
+    statistics are over the measured ones."""
+    from fusionbench.runner import PREFIX_RUNS
+
+    p = tmp_path / "settle.toml"
+    p.write_text('name = "settle"\nduration_s = 100.0\nrate_hz = 20.0\nruns = 7\nmethods = ["coarse"]\n'
+                 '[site]\nlat_deg = 34.0\n[imu]\npreset = "seed000"\n[metrics]\nsettling_band_arcmin = 15.0\n')
+    scn = scenarios.load(p)
+    smoother = "tests.test_runner:WholeRecordCoarse"
+    one = run_scenario(scn, methods=[smoother], runs=7, seed=2, progress=False)
+    split = run_scenario(scn, methods=[smoother], runs=7, seed=2, progress=False, batch_size=3)
+    s1, s2 = one.outcomes[smoother].extra["settle"], split.outcomes[smoother].extra["settle"]
+    assert PREFIX_RUNS == 5 and np.all(np.isfinite(s1[:5])) and np.all(np.isnan(s1[5:]))
+    assert np.array_equal(s1, s2, equal_nan=True)
+    assert one.metrics["methods"][smoother]["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(s1[:5]))
+    assert one.outcomes[smoother].extra["settled"].shape == (7,)  # inside the band at the end: known for every run
