@@ -31,9 +31,12 @@ condition) and adds ``conditions``, ``cells`` and ``scoreboard``.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
+from joblib import Parallel, delayed
+from tqdm import tqdm
 
 from . import fields, imu, metrics, units
 from .aligner import available_methods, supports
@@ -218,6 +221,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     for n in names:  # fail early, with the method's own message
         probe = condition_scenario(matrix, matrix.conditions[0], quick).method(n)
         claims[n] = supports(probe)
+    todo = []
     for cond in matrix.conditions:
         scn = condition_scenario(matrix, cond, quick)
         bound = condition_bound(scn, cond, duration)
@@ -230,10 +234,17 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         for n in names:
             if n not in claimed:
                 cells[n][cond.name] = {"status": "not claimed"}
-        if not claimed:
-            continue
-        out = run_scenario(scn, methods=claimed, runs=runs, seed=seed, quick=quick, n_jobs=n_jobs, progress=progress,
-                           refusals=True)
+        if claimed:
+            todo.append((cond, scn, claimed, bound))
+    # one condition per worker, all its runs in one batch (the batched filters vectorize over runs); the same
+    # numbers as any other split, since run k of a seed does not depend on the batching
+    run = delayed(run_scenario)
+    show = sys.stderr.isatty() if progress is None else progress
+    jobs = (run(scn, methods=claimed, runs=runs, seed=seed, quick=quick, n_jobs=1, progress=False, refusals=True)
+            for _, scn, claimed, _ in todo)
+    results = list(tqdm(Parallel(n_jobs=n_jobs, return_as="generator")(jobs), total=len(todo), desc=matrix.name,
+                        unit="condition", disable=not show))
+    for (cond, _, claimed, bound), out in zip(todo, results):
         outputs[cond.name] = out
         conditions[cond.name]["limit_arcmin"] = _axes(out.limits / units.ARCMIN)
         for n in claimed:
