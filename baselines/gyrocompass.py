@@ -92,8 +92,9 @@ class PIDGyrocompass:
     """
 
     name = "pid"
-    # up to 70 deg: at 75 deg under seed 000's sway with a 0.05 m/s reference its azimuth ends 6 bounds off
-    supports = Supports(bases=("static", "sway"), max_abs_lat_deg=70.0)
+    # up to 70 deg: at 75 deg under seed 000's sway with a 0.05 m/s reference its azimuth ends 6 bounds off;
+    # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.9 arcmin from the limit (conformance)
+    supports = Supports(bases=("static", "sway"), max_abs_lat_deg=70.0, max_bias_ratio=0.05)
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
     def __init__(self, period=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
                  compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None):

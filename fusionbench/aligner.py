@@ -191,11 +191,17 @@ class Supports:
         Highest |latitude| claimed, deg (gyrocompassing loses the horizontal earth rate toward the poles).
     needs_init : bool
         The method cannot start on its own: it needs an initial attitude (a navigator, not an aligner).
+    max_bias_ratio : float
+        Largest gyro bias claimed, as a fraction of the horizontal earth rate at the site
+        (:func:`azimuth_bias_ratio`, dimensionless; the azimuth limit is about its arcsine). The default is
+        the refusal level :data:`MAX_BIAS_TO_EARTH_RATE`; 0.05 claims navigation-grade gyros only (a
+        0.01 deg/h gyro is 0.0004-0.0014 up to 75 deg, a 1 deg/h tactical one 0.07-0.29).
     """
 
     bases: tuple = ("static", "sway")
     max_abs_lat_deg: float = 80.0
     needs_init: bool = False
+    max_bias_ratio: float = MAX_BIAS_TO_EARTH_RATE
 
     def __post_init__(self):
         bad = [b for b in self.bases if b not in BASES]
@@ -203,10 +209,15 @@ class Supports:
             raise ValueError(f"supports bases: expected some of {BASES}, found {bad}")
         if not 0.0 <= self.max_abs_lat_deg <= 90.0:
             raise ValueError(f"supports max_abs_lat_deg: expected 0 to 90 deg, found {self.max_abs_lat_deg}")
+        if not 0.0 < self.max_bias_ratio <= MAX_BIAS_TO_EARTH_RATE:
+            raise ValueError(f"supports max_bias_ratio: expected a fraction of the horizontal earth rate in (0, "
+                             f"{MAX_BIAS_TO_EARTH_RATE:g}], found {self.max_bias_ratio}")
 
-    def covers(self, base: str, lat_deg: float) -> bool:
-        """Whether the method claims a condition with this base at this latitude (deg)."""
-        return base in self.bases and abs(lat_deg) <= self.max_abs_lat_deg + 1e-9
+    def covers(self, base: str, lat_deg: float, bias_ratio: float = 0.0) -> bool:
+        """Whether the method claims a condition with this base, at this latitude (deg), with a gyro whose bias is
+        ``bias_ratio`` of the horizontal earth rate there (:func:`azimuth_bias_ratio`)."""
+        return (base in self.bases and abs(lat_deg) <= self.max_abs_lat_deg + 1e-9
+                and bias_ratio <= self.max_bias_ratio + 1e-12)
 
 
 def supports(method) -> Supports:

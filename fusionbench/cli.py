@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, attitude, scenarios
-from .aligner import Site, available_methods, check_time_rule, load_method, supports, uses_noise_model
+from .aligner import (MAX_BIAS_TO_EARTH_RATE, Site, available_methods, check_time_rule, load_method, supports,
+                      uses_noise_model)
 from .imu import load_spec
 
 
@@ -71,7 +72,9 @@ def _method_notes(cls):
     notes = []
     claims = supports(cls)
     notes.append("not an aligner: needs an initial attitude" if claims.needs_init else
-                 f"claims {', '.join(claims.bases)} up to {claims.max_abs_lat_deg:g} deg" if claims.bases else
+                 f"claims {', '.join(claims.bases)} up to {claims.max_abs_lat_deg:g} deg"
+                 + (f", gyro bias up to {claims.max_bias_ratio:g} of the horizontal earth rate"
+                    if claims.max_bias_ratio < MAX_BIAS_TO_EARTH_RATE else "") if claims.bases else
                  "claims no condition: kept to reproduce its paper")
     if getattr(cls, "variant_of", None):
         opts = ", ".join(f"{k}={v!r}" for k, v in cls.variant_options.items())

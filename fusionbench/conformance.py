@@ -39,7 +39,7 @@ from joblib import Parallel, delayed
 from tqdm import tqdm
 
 from . import fields, imu, metrics, units
-from .aligner import available_methods, supports
+from .aligner import available_methods, azimuth_bias_ratio, supports
 
 #: Bases of a condition: kind claimed (:data:`fusionbench.aligner.BASES`), sway amplitude (deg) and frequency (Hz)
 #: of [pitch, roll, yaw].
@@ -227,9 +227,11 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         bound = condition_bound(scn, cond, duration)
         band = max(matrix.settling_band_arcmin, 3.0 * bound[2] / units.ARCMIN)
         scn = condition_scenario(matrix, cond, quick, band_arcmin=band)
-        claimed = [n for n in names if cond.expect == "refuse" or claims[n].covers(cond.kind, cond.lat_deg)]
+        ratio = azimuth_bias_ratio(scn.imu_spec, np.radians(cond.lat_deg))
+        claimed = [n for n in names if cond.expect == "refuse" or claims[n].covers(cond.kind, cond.lat_deg, ratio)]
         conditions[cond.name] = {"base": cond.base, "lat_deg": cond.lat_deg, "heading_deg": cond.heading_deg,
                                  "imu": cond.imu, "vref_sigma_mps": cond.vref_sigma_mps, "expect": cond.expect,
+                                 "gyro_bias_ratio": float(ratio),
                                  "bound_arcmin": _axes(bound / units.ARCMIN), "settling_band_arcmin": band}
         for n in names:
             if n not in claimed:
