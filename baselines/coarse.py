@@ -194,6 +194,12 @@ def velocity_integral_inertial(t, t_start, vref, lat, h, chunk=20000):
     return Cv - Cv[:, :1] + integral, C_n_i0
 
 
+#: Sub-windows of the relevelling window whose scatter tells a base's own motion (no reference given).
+SUBWINDOWS = 4
+#: A correction of the level that many times its noise is a real one (the fit's drift), not the base's motion.
+SIGNIFICANT = 3.0
+
+
 class InertialCoarseAligner:
     """Inertial-frame coarse alignment (method ``coarse-i0``), robust to sway; in motion with a velocity reference.
 
@@ -259,8 +265,9 @@ class InertialCoarseAligner:
         Each attitude's level is taken from the mean specific force of this many seconds before it (20 s;
         None: the fit's level; see :meth:`_relevel`).
     level_noise_max : float
-        With a reference, the largest level error (rad, 3e-5: 0.1 arcmin) its slope's noise may cause for the
-        level to be taken that way.
+        The largest level error (rad, 3e-5: 0.1 arcmin) the window's noise may cause for the level to be taken
+        that way: with a reference, its slope's noise; without, the scatter of the specific force between
+        four sub-windows (a base moving a little, e.g. a moored ship), over 2.
     imu : str, path or IMUSpec, optional
         The IMU, used only to refuse when its gyro bias hides the earth rate; None: not checked.
     """
@@ -401,19 +408,34 @@ class InertialCoarseAligner:
         the level by f_h / g, as it does for any method.
         """
         g = site.g
-        for i, j in enumerate(hist):
-            j0 = int(np.searchsorted(tk, tk[j] - self.level_window_s))
-            if j0 >= j:
-                continue
+
+        def mean_force(j0, j):
+            """Mean specific force (R, 3) m/s^2 in n between kept times j0 and j."""
             dt_w = tk[j] - tk[j0]
             f_i0 = np.einsum("rab,rb->ra", C_b0_i0, V_keep[:, j] - V_keep[:, j0]) / dt_w
             # the navigation frame turns by OMEGA_IE dt_w over the window: resolve with its mean over the window
             # (trapezoid over the kept times; exact to second order in OMEGA_IE dt_w)
             w = np.diff(tk[j0:j + 1])
             C_mean = (np.einsum("k,rkab->rab", w, C_n_i0[:, j0:j]) + np.einsum("k,rkab->rab", w, C_n_i0[:, j0 + 1:j + 1]))
-            f_n = np.einsum("rba,rb->ra", C_mean / (2 * dt_w), f_i0)
+            return np.einsum("rba,rb->ra", C_mean / (2 * dt_w), f_i0)
+
+        for i, j in enumerate(hist):
+            j0 = int(np.searchsorted(tk, tk[j] - self.level_window_s))
+            if j0 >= j:
+                continue
+            f_n = mean_force(j0, j)
             expect = np.broadcast_to(-earth.gravity_n(site.lat, site.h), f_n.shape).copy()
             use = np.ones(len(f_n), bool)
+            parts = np.linspace(j0, j, SUBWINDOWS + 1).round().astype(int)
+            if vref is None and np.all(np.diff(parts) > 0):
+                # no reference: a base that moves a little (a moored ship's heave and surge) shows as a scatter of
+                # the force between sub-windows (the window's mean has it over sqrt(SUBWINDOWS) as its noise); the
+                # correction is made where that noise is small or the correction stands out of it (three times:
+                # a gyro bias's drift of the fit), else the fit's level stays
+                f_sub = np.stack([mean_force(a, b) for a, b in zip(parts[:-1], parts[1:])])  # (S, R, 3)
+                noise = np.std(f_sub[..., :2], axis=0, ddof=1).max(axis=-1) / np.sqrt(SUBWINDOWS)
+                shift = np.abs(f_n[:, :2] - expect[:, :2]).max(axis=-1)
+                use = (noise / g < self.level_noise_max) | (shift > SIGNIFICANT * noise)
             if vref is not None:  # the reference's acceleration: the least-squares slope of its samples (noise averages)
                 seg = slice(keep[j0], keep[j] + 1)
                 tau = t[seg] - t[seg].mean()
