@@ -89,6 +89,10 @@ def write_report(out, folder):
         settle.append(f"| `{n}` | " + " | ".join(
             f"{m['cells'][n][c]['settling_mean_s']:.0f}" if "settling_mean_s" in m["cells"][n].get(c, {}) else "·"
             for c in conds) + " |")
+    spread = 1.0 / np.sqrt(2.0 * m["runs"])  # relative standard deviation of an RMS over that many runs
+    scatter = (f" With {m['runs']} runs an optimal method's efficiency scatters by +-{100 * spread:.0f} % (1 / sqrt(2 runs)), "
+               f"and every method on a condition sees the same recordings: read the verdicts at 20 runs or more."
+               if m["runs"] < 20 else "")
     text = f"""# {m['scenario']}
 
 {matrix.description}
@@ -102,7 +106,7 @@ passes when the efficiency is at most the method's threshold and the level error
 where that is larger (the sensors' noise alone leaves an optimal estimator further off); on the MEMS condition the
 only right answer is to refuse. ✗ marks a failure, · a condition the method does not claim.
 
-**{m['scoreboard']['passed']} of {m['scoreboard']['total']} cells pass.**
+**{m['scoreboard']['passed']} of {m['scoreboard']['total']} cells pass.**{scatter}
 
 {chr(10).join(board)}
 
