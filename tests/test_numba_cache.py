@@ -1,0 +1,45 @@
+"""numba's compiled kernels are cached in a per-user directory, never beside the installed modules (files left in
+site-packages outlive an uninstall and shadow a later editable install)."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import fusionbench
+
+PACKAGES = [Path(fusionbench.__file__).parent] + [Path(fusionbench.__file__).parent.parent / p
+                                                   for p in ("baselines", "adrc", "damping")]
+SCRIPT = """
+import numpy as np
+from fusionbench import trajectory, imu
+from fusionbench.aligner import Site
+from baselines.gyrocompass import PIDGyrocompass
+tr = trajectory.Trajectory(0.6, 1.9, 0.0, trajectory.EulerSway(mean=np.zeros(3)), duration=90.0)
+data = imu.simulate(tr, imu.PRESETS["navigation"], 0.1, runs=1, seed=0)
+PIDGyrocompass().align(data, Site(0.6, 1.9, 0.0))
+import numba
+print(numba.config.CACHE_DIR)
+"""
+
+
+def _cache_files(folders):
+    return {p for f in folders if f.is_dir() for p in f.rglob("*.nb[ic]")}
+
+
+def test_kernels_cached_in_the_user_cache_directory(tmp_path):
+    before = _cache_files(PACKAGES)
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+    out = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, check=True)
+    expect = tmp_path / "fusionbench" / "numba"
+    assert out.stdout.strip().splitlines()[-1] == str(expect)
+    assert _cache_files([expect]), "the strapdown kernel should have been cached there"
+    assert _cache_files(PACKAGES) == before  # nothing new beside the modules
+
+
+def test_an_explicit_numba_cache_dir_wins(tmp_path):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "mine"), "XDG_CACHE_HOME": str(tmp_path / "xdg")}
+    code = "import fusionbench, numba; print(fusionbench.numba_cache_dir()); print(numba.config.CACHE_DIR)"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == [str(tmp_path / "mine")] * 2
