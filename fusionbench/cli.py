@@ -9,11 +9,12 @@ import argparse
 import inspect
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
-from . import __version__, attitude, scenarios
+from . import __version__, attitude, provenance, scenarios
 from .aligner import (MAX_BIAS_TO_EARTH_RATE, Site, available_methods, check_time_rule, load_method, supports,
                       uses_noise_model)
 from .imu import load_spec
@@ -121,7 +122,12 @@ def _cmd_run(args):
     out_dir = Path(args.out)
     outs = []
     for scn in scns:
+        t0 = time.perf_counter()
         res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick, n_jobs=args.jobs)
+        m = res.metrics
+        m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
+                                             duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
+                                             quick=args.quick, wall_s=time.perf_counter() - t0)
         folder = out_dir / scn.name if args.scenario == "all" else out_dir
         path = write_scenario_report(res, folder)
         outs.append(res)

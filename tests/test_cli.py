@@ -77,6 +77,7 @@ def test_run_check_and_regression(tmp_path):
     assert m["quick"] is True and m["runs"] == 2
     assert set(m["methods"]) == {"coarse", "baselines.coarse:InertialCoarseAligner"}
     assert (out / "report.md").exists() and (out / "errors.png").exists()
+    _check_provenance(m["provenance"], runs=2)
     ref = tmp_path / "ref.json"
     ref.write_text(json.dumps(m))
     assert cli("check", out, "--reference", ref).returncode == 0
@@ -100,3 +101,23 @@ def test_run_refuses_bad_sizes_and_methods(tmp_path, args, word):
     r = cli("run", "static-34n", "--quick", "--out", tmp_path / "o", *args)
     assert r.returncode == 2 and word in r.stderr and r.stderr.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def _check_provenance(p, runs):
+    """metrics.json says which code, when, on what, with which command and size, and how long it took."""
+    from datetime import datetime, timedelta, timezone
+    from importlib import metadata
+    from pathlib import Path
+
+    import fusionbench
+
+    assert p["fusionbench"] == fusionbench.__version__
+    head = subprocess.run(["git", "-C", str(Path(fusionbench.__file__).parent), "rev-parse", "HEAD"],
+                          capture_output=True, text=True)
+    assert p["git_commit"] == (head.stdout.strip() if head.returncode == 0 else None)
+    when = datetime.fromisoformat(p["date_utc"])
+    assert timedelta(0) <= datetime.now(timezone.utc) - when < timedelta(minutes=10)
+    assert p["libraries"]["numpy"] == metadata.version("numpy") and p["python"] == sys.version.split()[0]
+    assert p["command"].split()[1:4] == ["run", "static-34n", "--quick"]
+    assert p["runs"] == runs and p["seed"] == 0 and p["quick"] is True and p["duration_s"] == 120.0
+    assert 0.0 < p["wall_s"] < 300.0
