@@ -141,21 +141,31 @@ def _cmd_check(args):
     from .check import compare, format_table, load_json, metrics_files, reference_for
 
     failed = False
-    for path in metrics_files(args.dir):
+    pairs = []
+    for path in metrics_files(args.dir):  # every pair first: a run of another size is one line, not N regressions
         new = load_json(path, "metrics")
         ref, ref_path = reference_for(args.reference, new["scenario"])
-        note = ""
-        if (ref.get("quick"), ref.get("runs"), ref.get("seed")) != (new.get("quick"), new.get("runs"), new.get("seed")):
-            note = (f" (note: reference made with quick={ref.get('quick')}, runs={ref.get('runs')}, seed={ref.get('seed')};"
-                    f" this run quick={new.get('quick')}, runs={new.get('runs')}, seed={new.get('seed')})")
+        if _size(ref) != _size(new):
+            raise ValueError(f"{path}: the run is {_size_text(new)}, the reference {ref_path} is {_size_text(ref)}: "
+                             f"compare runs of the same size and seed")
+        pairs.append((new, ref, ref_path))
+    for new, ref, ref_path in pairs:
         bad = compare(new, ref)
         if bad:
             failed = True
-            print(f"{new['scenario']}: REGRESSED against {ref_path}{note}")
+            print(f"{new['scenario']}: REGRESSED against {ref_path}")
             print(format_table(bad))
         else:
-            print(f"{new['scenario']}: ok against {ref_path}{note}")
+            print(f"{new['scenario']}: ok against {ref_path}")
     return 1 if failed else 0
+
+
+def _size(m):
+    return bool(m.get("quick")), m.get("runs"), m.get("seed")
+
+
+def _size_text(m):
+    return f"{'--quick' if m.get('quick') else 'default'} size, {m.get('runs')} runs, seed {m.get('seed')}"
 
 
 def main(argv=None):

@@ -85,6 +85,11 @@ def test_run_check_and_regression(tmp_path):
     ref.write_text(json.dumps(m))
     r = cli("check", out, "--reference", ref)
     assert r.returncode == 1 and "final phiU |rms|" in r.stdout
+    # a reference of another size: one line naming both sizes, exit 2, no table
+    ref.write_text(json.dumps({**m, "quick": False, "runs": 50}))
+    r = cli("check", out, "--reference", ref)
+    assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1
+    assert "--quick size, 2 runs, seed 0" in r.stderr and "default size, 50 runs, seed 0" in r.stderr
 
 
 def test_run_with_a_bad_scenario_file_writes_nothing(tmp_path):
