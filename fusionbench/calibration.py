@@ -30,10 +30,10 @@ from importlib.metadata import entry_points
 
 import numpy as np
 from joblib import Parallel, delayed
-from tqdm import tqdm
 
 from . import metrics, units
 from .aligner import load_entry
+from .progress import bar as progress_bar
 from . import platform as pf
 
 GROUP = "fusionbench.calibrators"
@@ -231,9 +231,9 @@ class CalibrationOutput:
     outcomes: dict
 
 
-def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=False):
+def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None):
     """Monte Carlo of a platform-rolling scenario (see the module notes); returns a CalibrationOutput.
-    ``progress``: a tqdm bar over runs."""
+    ``progress``: a bar over runs (:func:`fusionbench.progress.bar`: None shows one on a terminal)."""
     methods = list(methods or scn.methods)
     for m in methods:
         scn.calibrator(m)
@@ -248,9 +248,12 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1,
         done = Parallel(n_jobs=n_jobs, return_as="generator")(
             delayed(_one_run)(scn, spec, methods, k, seed) for k in range(runs))
     acc = {name: {} for name in methods}
-    for r in tqdm(done, total=runs, desc=scn.name, unit="run", disable=not progress):
+    pbar = progress_bar(progress, runs, scn.name)
+    for r in done:
         for name in methods:
             _accumulate(acc[name], r[name])
+        pbar.update(1)
+    pbar.close()
     total = sum(s.duration for s in spec.scheme.segments)
     t = np.arange(1, int(round(total / spec.scheme.filter_s)) + 1) * spec.scheme.filter_s  # the filter times
     outcomes = {}

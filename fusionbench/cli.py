@@ -13,8 +13,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from . import __version__, attitude, provenance, scenarios
+from . import __version__, attitude, progress, provenance, scenarios
 from .aligner import (MAX_BIAS_TO_EARTH_RATE, Site, available_methods, check_time_rule, load_method, supports,
                       uses_noise_model)
 from .imu import load_spec
@@ -121,19 +122,27 @@ def _cmd_run(args):
     methods = args.methods.split(",") if args.methods else None
     out_dir = Path(args.out)
     outs = []
+    # one bar for the whole command (scenarios x runs, elapsed and left) on a terminal; else a line per scenario
+    total = sum(progress.expected_runs(scn, args.runs, args.quick) for scn in scns)
+    pbar = tqdm(total=total, unit="run", desc="fusionbench run", disable=not sys.stderr.isatty(), dynamic_ncols=True)
+    start = time.perf_counter()
     for scn in scns:
         t0 = time.perf_counter()
-        res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick, n_jobs=args.jobs)
+        pbar.set_postfix_str(scn.name)
+        res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick, n_jobs=args.jobs,
+                           progress=pbar)
+        wall = time.perf_counter() - t0
         m = res.metrics
         m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
                                              duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
-                                             quick=args.quick, wall_s=time.perf_counter() - t0)
+                                             quick=args.quick, wall_s=wall)
         folder = out_dir / scn.name if args.scenario == "all" else out_dir
         path = write_scenario_report(res, folder)
         outs.append(res)
-        print(f"{scn.name}: {path}")
+        pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
+    pbar.close()
     if args.scenario == "all":
-        print(f"index: {write_index(out_dir, outs)}")
+        print(f"index: {write_index(out_dir, outs)} ({time.perf_counter() - start:.0f} s in all)")
     return 0
 
 

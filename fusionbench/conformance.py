@@ -31,15 +31,14 @@ condition) and adds ``conditions``, ``cells`` and ``scoreboard``.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
 from joblib import Parallel, delayed
-from tqdm import tqdm
 
 from . import fields, imu, metrics, units
 from .aligner import available_methods, azimuth_bias_ratio, supports
+from .progress import bar as progress_bar
 
 #: Bases of a condition: kind claimed (:data:`fusionbench.aligner.BASES`), sway amplitude (deg) and frequency (Hz)
 #: of [pitch, roll, yaw].
@@ -241,11 +240,14 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     # one condition per worker, all its runs in one batch (the batched filters vectorize over runs); the same
     # numbers as any other split, since run k of a seed does not depend on the batching
     run = delayed(run_scenario)
-    show = sys.stderr.isatty() if progress is None else progress
     jobs = (run(scn, methods=claimed, runs=runs, seed=seed, quick=quick, n_jobs=1, progress=False, refusals=True)
             for _, scn, claimed, _ in todo)
-    results = list(tqdm(Parallel(n_jobs=n_jobs, return_as="generator")(jobs), total=len(todo), desc=matrix.name,
-                        unit="condition", disable=not show))
+    pbar = progress_bar(progress, runs * len(todo), matrix.name)
+    results = []
+    for out in Parallel(n_jobs=n_jobs, return_as="generator")(jobs):  # conditions in order, as they finish
+        results.append(out)
+        pbar.update(runs)
+    pbar.close()
     for (cond, _, claimed, bound), out in zip(todo, results):
         outputs[cond.name] = out
         conditions[cond.name]["limit_arcmin"] = _axes(out.limits / units.ARCMIN)

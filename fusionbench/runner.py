@@ -10,19 +10,18 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from joblib import Parallel, delayed
-from tqdm import tqdm
 
 from . import imu as imu_mod
 from . import earth, metrics, units
 from .aligner import check_time_rule, is_causal
 from .imudata import IMUData
 from .io import atomic_open
+from .progress import bar as progress_bar
 
 #: Longest history kept per method for figures (points).
 HISTORY_POINTS = 400
@@ -225,7 +224,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         Use the scenario's reduced duration and run count.
     n_jobs : int
         Parallel workers over batches (joblib; -1: all cores); 1, or a single batch, runs in this process.
-    progress : bool, optional
+    progress : bool or bar, optional
         Show a tqdm bar over runs (default: only when stderr is a terminal).
     batch_size : int, optional
         Runs per batch (default: as many as fit in about 200 MB of IMU samples).
@@ -245,8 +244,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     if scn.experiment == "platform-rolling":
         from .calibration import run_calibration
 
-        return run_calibration(scn, methods, runs, seed, quick, n_jobs,
-                               progress=sys.stderr.isatty() if progress is None else progress)
+        return run_calibration(scn, methods, runs, seed, quick, n_jobs, progress=progress)
     methods = list(methods or scn.methods)
     for m in methods:  # fail early, with the method's own message
         scn.method(m)
@@ -264,18 +262,17 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
             batch_size = max(1, min(batch_size, -(-runs // workers)))
     starts = list(range(0, runs, batch_size))
     jobs = [(k0, min(batch_size, runs - k0)) for k0 in starts]
-    show = sys.stderr.isatty() if progress is None else progress
-    bar = tqdm(total=runs, desc=scn.name, unit="run", disable=not show)
+    pbar = progress_bar(progress, runs, scn.name)
     if n_jobs == 1 or len(jobs) == 1:  # one batch: no worker to start
-        results = []
-        for k0, n in jobs:
-            results.append(_run_batch(scn, methods, k0, n, seed, duration, refusals))
-            bar.update(n)
-    else:
-        results = Parallel(n_jobs=n_jobs)(delayed(_run_batch)(scn, methods, k0, n, seed, duration, refusals)
-                                          for k0, n in jobs)
-        bar.update(runs)
-    bar.close()
+        done = (_run_batch(scn, methods, k0, n, seed, duration, refusals) for k0, n in jobs)
+    else:  # batches in order, each as soon as it (and those before it) are done
+        done = Parallel(n_jobs=n_jobs, return_as="generator")(
+            delayed(_run_batch)(scn, methods, k0, n, seed, duration, refusals) for k0, n in jobs)
+    results = []
+    for (_, n), r in zip(jobs, done):
+        results.append(r)
+        pbar.update(n)
+    pbar.close()
 
     traj = scn.trajectory(duration)
     limits = _limits(scn, traj, [duration], traj.truth([duration]).C_bn)[0]

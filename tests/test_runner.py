@@ -265,3 +265,28 @@ def test_smoother_settling_on_the_first_runs_whatever_the_batching(tmp_path):
     assert np.array_equal(s1, s2, equal_nan=True)
     assert one.metrics["methods"][smoother]["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(s1[:5]))
     assert one.outcomes[smoother].extra["settled"].shape == (7,)  # inside the band at the end: known for every run
+
+
+class _Counter:
+    """A bar as the command line shares it: counts the runs reported finished, in steps."""
+
+    def __init__(self):
+        self.steps = []
+
+    def update(self, n=1):
+        self.steps.append(n)
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_a_shared_bar_advances_by_finished_runs(n_jobs):
+    """``run all`` shares one bar: each scenario advances it by exactly its runs, batch by batch as batches finish
+    (also under workers), and leaves it open for the next scenario."""
+    from fusionbench import progress
+
+    scn = scenarios.get("static-34n")
+    bar = _Counter()
+    run_scenario(scn, methods=["coarse"], runs=5, quick=True, n_jobs=n_jobs, batch_size=2, progress=bar)
+    assert bar.steps == [2, 2, 1]
+    assert progress.expected_runs(scn, 5, True) == 5
+    conf = scenarios.get("conformance")
+    assert progress.expected_runs(conf, None, True) == 3 * len(conf.conditions)

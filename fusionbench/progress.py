@@ -1,0 +1,38 @@
+"""Progress over Monte Carlo runs: one bar a caller can share between scenarios (``fusionbench run all``).
+
+The runners take ``progress``: None (a bar of their own on a terminal, nothing otherwise), a bool, or a bar
+(anything with ``update(n)``) that they advance by the runs they finish and leave open.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from tqdm import tqdm
+
+
+class _Shared:
+    """A caller's bar: advanced here, closed by its owner."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def update(self, n=1):
+        self.bar.update(n)
+
+    def close(self):
+        pass
+
+
+def bar(progress, total, desc):
+    """The bar a runner advances by finished runs: the caller's (shared, left open) or its own."""
+    if progress is not None and hasattr(progress, "update"):
+        return _Shared(progress)
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    return tqdm(total=total, desc=desc, unit="run", disable=not show)
+
+
+def expected_runs(scn, runs=None, quick=False):
+    """Runs a scenario will finish (a conformance matrix: runs per condition x conditions)."""
+    per = scn.sized(quick)[1] if runs is None else int(runs)
+    return per * len(getattr(scn, "conditions", ())) if getattr(scn, "experiment", "") == "conformance" else per
