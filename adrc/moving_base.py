@@ -271,7 +271,7 @@ import numpy as np
 
 from fusionbench import earth
 from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, coarse_then_fine,
-                                 initial_attitude, variant)
+                                 check_not_accelerating, initial_attitude, variant)
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.compass import check_compass_latitude
@@ -765,16 +765,11 @@ class ESOTDAligner:
                                                            "velocity_error_mps": hist_y})
 
     def _check_not_accelerating(self, dvel, dt, site):
-        """Without a reference: refuse a record whose mean specific force exceeds gravity (a^2 / 2 g^2 at a
-        constant acceleration a, which the level channels would otherwise read as a tilt of a / g)."""
+        """Without a reference: refuse a record whose mean specific force exceeds gravity
+        (:func:`fusionbench.aligner.check_not_accelerating`)."""
         g = earth.gravity(site.lat, site.h)
         excess = np.linalg.norm(dvel, axis=-1).mean(axis=1) / (dt * g) - 1.0
-        r = int(np.argmax(np.abs(excess)))
-        if abs(excess[r]) > self.max_gravity_excess:
-            raise ValueError(f"{self.name}: the base accelerates (recording {r}: the specific force differs from "
-                             f"gravity by {excess[r] * 1e3:+.1f} mg, on a stationary or swaying base by less than "
-                             f"{self.max_gravity_excess * 1e3:.1f} mg: about {np.sqrt(2 * abs(excess[r])):.2f} g of "
-                             f"horizontal acceleration); a moving base needs a velocity reference (vref)")
+        check_not_accelerating(excess, self.max_gravity_excess, self.name)
 
 
 def _slow_rate(beta1, beta2):

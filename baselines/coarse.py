@@ -28,11 +28,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_not_accelerating
 from fusionbench.imu import load_spec
-from fusionbench.attitude import orthonormalize, rotvec_to_dcm, skew
+from fusionbench.attitude import rotvec_to_dcm
 from fusionbench.imudata import IMUData
 from fusionbench.strapdown import body_increments
+
+from .coarse_level import relevel
 
 
 def triad(f_b, w_b):
@@ -194,12 +196,6 @@ def velocity_integral_inertial(t, t_start, vref, lat, h, chunk=20000):
     return Cv - Cv[:, :1] + integral, C_n_i0
 
 
-#: Sub-windows of the relevelling window whose scatter tells a base's own motion (no reference given).
-SUBWINDOWS = 4
-#: A correction of the level that many times its noise is a real one (the fit's drift), not the base's motion.
-SIGNIFICANT = 3.0
-
-
 class InertialCoarseAligner:
     """Inertial-frame coarse alignment (method ``coarse-i0``), robust to sway; in motion with a velocity reference.
 
@@ -263,7 +259,7 @@ class InertialCoarseAligner:
         ``eso-td (coarse-i0 start): ...``).
     level_window_s : float or None
         Each attitude's level is taken from the mean specific force of this many seconds before it (20 s;
-        None: the fit's level; see :meth:`_relevel`).
+        None: the fit's level; see :func:`baselines.coarse_level.relevel`).
     level_noise_max : float
         The largest level error (rad, 3e-5: 0.1 arcmin) the window's noise may cause for the level to be taken
         that way: with a reference, its slope's noise; without, the scatter of the specific force between
@@ -381,75 +377,11 @@ class InertialCoarseAligner:
                 raise ValueError(f"{who}: the base moves (recording {r}: the inertial-frame fit leaves {resid[r]:.2f} m/s "
                                  f"rms, a stationary or swaying base less than {thr:.2f} m/s over {T:g} s); a moving "
                                  f"base needs a velocity reference (vref)")
-            r = int(np.argmax(np.abs(excess)))
-            if abs(excess[r]) > self.max_gravity_excess:
-                raise ValueError(f"{who}: the base accelerates (recording {r}: the specific force differs from gravity "
-                                 f"by {excess[r] * 1e3:+.1f} mg, on a stationary or swaying base by less than "
-                                 f"{self.max_gravity_excess * 1e3:.1f} mg: about {np.sqrt(2 * abs(excess[r])):.2f} g "
-                                 f"of horizontal acceleration); a moving base needs a velocity reference (vref)")
+            check_not_accelerating(excess, self.max_gravity_excess, who)
         hist = np.linspace(0, keep.size - 1, self.history_points).round().astype(int)
         hist = np.unique(hist[hist >= fit[0]])
         C_bn = np.swapaxes(C_n_i0[:, hist], -1, -2) @ C_b0_i0[:, None] @ C_keep[:, hist]
         if self.level_window_s:
-            C_bn = self._relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site)
+            C_bn = relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site, self.level_window_s,
+                           self.level_noise_max)
         return AlignmentResult(self.name, t[keep][hist], C_bn, {"fit_residual_mps": resid, "gravity_excess": excess})
-
-    def _relevel(self, C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site):
-        """Level each attitude of the history on the mean specific force of the ``level_window_s`` before it.
-
-        The fit spreads over the second half of the record, so a gyro bias's drift of the body frame b0 over
-        that half tilts the fitted attitude by about half the drift (2.5 arcmin for 1 deg/h over 300 s). The
-        specific force of the last seconds, resolved in n with the attitude found, should be the base's
-        (gravity, plus the reference's acceleration and Coriolis term on a moving base): a residual
-        ``d = [dE, dN]`` is a tilt ``phiE = dN / g``, ``phiN = -dE / g`` (``f x phi`` with f up; with a reference, its
-        acceleration is the least-squares slope of its samples over the window, so its noise averages out), removed
-        with ``C <- (I + [phi x]) C`` (per recording, unless the reference's slope is too noisy to tell the
-        level to ``level_noise_max``: then the fit's level stays). The azimuth is kept; on an accelerating base its error couples into
-        the level by f_h / g, as it does for any method.
-        """
-        g = site.g
-
-        def mean_force(j0, j):
-            """Mean specific force (R, 3) m/s^2 in n between kept times j0 and j."""
-            dt_w = tk[j] - tk[j0]
-            f_i0 = np.einsum("rab,rb->ra", C_b0_i0, V_keep[:, j] - V_keep[:, j0]) / dt_w
-            # the navigation frame turns by OMEGA_IE dt_w over the window: resolve with its mean over the window
-            # (trapezoid over the kept times; exact to second order in OMEGA_IE dt_w)
-            w = np.diff(tk[j0:j + 1])
-            C_mean = (np.einsum("k,rkab->rab", w, C_n_i0[:, j0:j]) + np.einsum("k,rkab->rab", w, C_n_i0[:, j0 + 1:j + 1]))
-            return np.einsum("rba,rb->ra", C_mean / (2 * dt_w), f_i0)
-
-        for i, j in enumerate(hist):
-            j0 = int(np.searchsorted(tk, tk[j] - self.level_window_s))
-            if j0 >= j:
-                continue
-            f_n = mean_force(j0, j)
-            expect = np.broadcast_to(-earth.gravity_n(site.lat, site.h), f_n.shape).copy()
-            use = np.ones(len(f_n), bool)
-            parts = np.linspace(j0, j, SUBWINDOWS + 1).round().astype(int)
-            if vref is None and np.all(np.diff(parts) > 0):
-                # no reference: a base that moves a little (a moored ship's heave and surge) shows as a scatter of
-                # the force between sub-windows (the window's mean has it over sqrt(SUBWINDOWS) as its noise); the
-                # correction is made where that noise is small or the correction stands out of it (three times:
-                # a gyro bias's drift of the fit), else the fit's level stays
-                f_sub = np.stack([mean_force(a, b) for a, b in zip(parts[:-1], parts[1:])])  # (S, R, 3)
-                noise = np.std(f_sub[..., :2], axis=0, ddof=1).max(axis=-1) / np.sqrt(SUBWINDOWS)
-                shift = np.abs(f_n[:, :2] - expect[:, :2]).max(axis=-1)
-                use = (noise / g < self.level_noise_max) | (shift > SIGNIFICANT * noise)
-            if vref is not None:  # the reference's acceleration: the least-squares slope of its samples (noise averages)
-                seg = slice(keep[j0], keep[j] + 1)
-                tau = t[seg] - t[seg].mean()
-                v = vref[:, seg]
-                v_mean = v.mean(axis=1)
-                accel = np.einsum("k,rkc->rc", tau, v - v_mean[:, None]) / np.sum(tau * tau)
-                w_cor = 2 * earth.earth_rate_n(site.lat) + earth.transport_rate_n(v_mean, site.lat, site.h)
-                expect = accel + np.cross(w_cor, v_mean) - earth.gravity_n(site.lat, site.h)
-                # the slope's own noise, from the samples' scatter about it: a noisy or sparse reference would
-                # tilt the level more than the fit does, so those recordings keep the fit's level
-                scatter = v[..., :2] - v_mean[:, None, :2] - tau[None, :, None] * accel[:, None, :2]
-                slope_sigma = np.sqrt(np.mean(scatter**2, axis=1) / np.sum(tau * tau))
-                use = slope_sigma.max(axis=1) / g < self.level_noise_max
-            d = np.where(use[:, None], f_n - expect, 0.0)
-            phi = np.stack([d[:, 1] / g, -d[:, 0] / g, np.zeros(len(d))], axis=-1)
-            C_bn[:, i] = (np.eye(3) + skew(phi)) @ C_bn[:, i]
-        return orthonormalize(C_bn)

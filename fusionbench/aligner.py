@@ -173,6 +173,23 @@ def check_azimuth_observable(spec, site: Site, name: str):
                          f"heading could be {np.degrees(np.arcsin(min(ratio, 1.0))):.0f} deg or more off)")
 
 
+def check_not_accelerating(excess, limit, name: str):
+    """Raise ValueError (one line) when a recording's mean specific force differs from gravity by more than
+    ``limit`` (both in g): a base without a velocity reference must be stationary or swaying, and a constant
+    horizontal acceleration ``a`` raises the mean specific force by about ``a^2 / 2 g^2`` (read as a tilt of
+    ``a / g`` otherwise).
+
+    ``excess`` (R,) is ``|mean specific force| / g - 1`` per recording; ``name`` opens the message.
+    """
+    excess = np.asarray(excess, dtype=float)
+    r = int(np.argmax(np.abs(excess)))
+    if abs(excess[r]) > limit:
+        raise ValueError(f"{name}: the base accelerates (recording {r}: the specific force differs from gravity by "
+                         f"{excess[r] * 1e3:+.1f} mg, on a stationary or swaying base by less than {limit * 1e3:.1f} mg: "
+                         f"about {np.sqrt(2 * abs(excess[r])):.2f} g of horizontal acceleration); a moving base needs a "
+                         f"velocity reference (vref)")
+
+
 #: Kinds of base a method can claim: stationary, swaying/moored (no translation beyond a disturbance), and
 #: moving (translating, with a velocity reference).
 BASES = ("static", "sway", "moving")
