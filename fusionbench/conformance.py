@@ -52,7 +52,7 @@ BASES = {
 MOVING_ACCEL = 0.1 * units.G0
 #: Mean tilt of every base, deg (pitch, roll): a level IMU would hide sign errors between the level axes.
 TILT_DEG = (1.0, -2.0)
-_TOP = {"name", "description", "experiment", "duration_s", "rate_hz", "runs", "methods", "quick", "metrics",
+_TOP = {"name", "description", "kind", "experiment", "duration_s", "rate_hz", "runs", "methods", "quick", "metrics",
         "conformance", "condition", "paper"}
 _CONDITION_KEYS = {"name", "base", "lat_deg", "heading_deg", "imu", "vref_sigma_mps", "expect"}
 
@@ -93,6 +93,7 @@ class Matrix:
     source: str = ""
     paper: dict = field(default_factory=dict)
     experiment: str = "conformance"
+    kind: str = "conformance"
 
     def sized(self, quick):
         """(duration_s, runs) for a full or a quick run."""
@@ -109,6 +110,9 @@ def parse(data, src="<conformance>"):
     if bad:
         raise fields.FieldError(f"{fields.where(src, bad[0])}: unknown (expected one of {sorted(_TOP)})")
     name = fields.string(data, "name", src)
+    if data.get("kind", "conformance") != "conformance":
+        raise fields.FieldError(f"{fields.where(src, 'kind')}: expected 'conformance' for a conformance matrix, "
+                                f"found {data['kind']!r}")
     duration = fields.number(data, "duration_s", src, lo=10.0, hi=86400.0)
     rate = fields.number(data, "rate_hz", src, lo=1.0, hi=10000.0)
     runs = int(fields.number(data, "runs", src, 20.0, lo=1, hi=100000))

@@ -34,6 +34,23 @@ def test_builtin_scenarios_load():
     assert np.degrees(s.site.lat) == pytest.approx(34.0)
 
 
+def test_scenario_kind_is_given_or_inferred(tmp_path):
+    # what the figures draw hangs on it: a stationary limit means nothing in free-inertial navigation
+    kinds = {n: scenarios.get(n).kind for n in scenarios.builtin_names()}
+    assert kinds["static-34n"] == kinds["sway-34n"] == "alignment"
+    assert kinds["paper001-moving-base"] == "moving-alignment"
+    assert kinds["paper004-accel-0.02"] == "navigation" and kinds["paper002-rolling"] == "calibration"
+    assert kinds["conformance"] == "conformance"
+    p = tmp_path / "s.toml"
+    p.write_text(TOML)
+    assert scenarios.load(p).kind == "alignment"  # no motion, no RMSE window
+    p.write_text(TOML + '[motion]\nsegments = [{accel_mps2 = [1.0, 0, 0], duration_s = 10.0}]\n')
+    assert scenarios.load(p).kind == "moving-alignment"
+    p.write_text('kind = "sailing"\n' + TOML)
+    with pytest.raises(scenarios.ScenarioError, match="field 'kind': expected one of"):
+        scenarios.load(p)
+
+
 @pytest.mark.parametrize("edit,field", [
     ('lat_deg = -45.0', "lat_deg"),
     ('preset = "tactical"', "imu.preset"),

@@ -7,6 +7,7 @@ Format (angles in degrees, times in s, sensor figures in the customary units nam
 
     name = "static-34n"
     description = "one line"
+    kind = "alignment"          # what the figures and the overview show (KINDS); inferred when absent
     duration_s = 300.0          # full size
     rate_hz = 100.0
     runs = 20                   # default Monte Carlo size
@@ -75,11 +76,19 @@ import numpy as np
 from .. import attitude, fields, imu, trajectory
 from ..aligner import Site, load_method
 
-_TOP = {"name", "description", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
+_TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
         "motion", "imu", "vref", "init", "metrics", "variants", "paper", "experiment", "platform"}
 #: Experiment kinds: alignment (the default: IMU data to aligners) and the platform self-calibration of
 #: seed 002 (a ``[platform]`` table, methods from the ``fusionbench.calibrators`` group).
 EXPERIMENTS = ("alignment", "platform-rolling", "conformance")
+#: What a scenario is about, which decides what its figures draw and which figure the overview scores:
+#: ``alignment`` (a stationary or swaying base: the theoretical limits and the settling band apply);
+#: ``moving-alignment`` (a vehicle under way with a velocity reference: the stationary limits do not apply,
+#: the error is scored against the truth); ``navigation`` (free-inertial navigation from a given attitude over
+#: hours, e.g. Schuler damping: no limit, no settling band); ``calibration`` (platform self-calibration) and
+#: ``conformance`` (the method x condition matrix). Inferred when a file gives none: from ``experiment``, then
+#: ``navigation`` when [metrics] has rmse_window_s, ``moving-alignment`` when [motion] has segments.
+KINDS = ("alignment", "moving-alignment", "navigation", "calibration", "conformance")
 _SECTIONS = {
     "quick": {"duration_s", "runs"},
     "site": {"lat_deg", "lon_deg", "height_m"},
@@ -132,6 +141,7 @@ class Scenario:
     experiment: str = "alignment"
     platform: object = None
     source: str = ""
+    kind: str = "alignment"
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -311,9 +321,23 @@ def parse(data: dict, src: str = "<scenario>") -> Scenario:
         total = sum(sg.duration for sg in plat.scheme.segments)
         if abs(total - duration) > 1e-6:
             raise ScenarioError(f"{_where(src, 'duration_s')}: expected the scheme's length {total:g} s, found {duration:g}")
+    kind = _kind(data, src, experiment, win is not None, bool(segs))
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
                     site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, win,
-                    amp_windows, compare, experiment, plat, src, data)
+                    amp_windows, compare, experiment, plat, src, kind, data)
+
+
+def _kind(data, src, experiment, has_rmse_window, moves):
+    """The scenario's ``kind`` (:data:`KINDS`): as given, else inferred (see KINDS)."""
+    if "kind" in data:
+        if data["kind"] not in KINDS:
+            raise ScenarioError(f"{_where(src, 'kind')}: expected one of {KINDS}, found {data['kind']!r}")
+        return data["kind"]
+    if experiment == "platform-rolling":
+        return "calibration"
+    if experiment == "conformance":
+        return "conformance"
+    return "navigation" if has_rmse_window else "moving-alignment" if moves else "alignment"
 
 
 def load(path) -> Scenario:
