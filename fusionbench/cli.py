@@ -47,9 +47,10 @@ def _parser():
     r.add_argument("--jobs", type=int, default=-1,
                    help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
                         "process; the numbers do not depend on it")
-    c = sub.add_parser("check", help="compare DIR/metrics.json with the committed reference metrics")
+    c = sub.add_parser("check", help="compare DIR/metrics.json (or DIR/*/metrics.json) with reference metrics")
     c.add_argument("dir")
-    c.add_argument("--reference", default="benchmarks/reference", help="reference folder or file")
+    c.add_argument("--reference", help="reference folder or file (default: the references installed with "
+                   "fusionbench for the run's size, --quick or default, seed 0)")
     return p
 
 
@@ -140,6 +141,7 @@ def _cmd_run(args):
         path = write_scenario_report(res, folder)
         outs.append(res)
         pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
+        sys.stdout.flush()  # a log file gets the line when the scenario ends, not when the buffer fills
     pbar.close()
     if args.scenario == "all":
         print(f"index: {write_index(out_dir, outs)} ({time.perf_counter() - start:.0f} s in all)")
@@ -147,13 +149,13 @@ def _cmd_run(args):
 
 
 def _cmd_check(args):
-    from .check import compare, format_table, load_json, metrics_files, reference_for
+    from .check import compare, format_table, load_json, metrics_files, packaged_reference, reference_for
 
     failed = False
     pairs = []
     for path in metrics_files(args.dir):  # every pair first: a run of another size is one line, not N regressions
         new = load_json(path, "metrics")
-        ref, ref_path = reference_for(args.reference, new["scenario"])
+        ref, ref_path = reference_for(args.reference or packaged_reference(bool(new.get("quick"))), new["scenario"])
         if _size(ref) != _size(new):
             raise ValueError(f"{path}: the run is {_size_text(new)}, the reference {ref_path} is {_size_text(ref)}: "
                              f"compare runs of the same size and seed")

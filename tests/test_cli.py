@@ -4,6 +4,7 @@ import json
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,6 +91,34 @@ def test_run_check_and_regression(tmp_path):
     r = cli("check", out, "--reference", ref)
     assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1
     assert "--quick size, 2 runs, seed 0" in r.stderr and "default size, 50 runs, seed 0" in r.stderr
+
+
+def test_check_finds_the_installed_reference_of_the_runs_size_from_any_directory(tmp_path):
+    out = tmp_path / "rep"
+    assert cli("run", "static-34n", "--quick", "--out", out, cwd=tmp_path).returncode == 0
+    r = cli("check", out, cwd=tmp_path)  # not the repository root: the references ship with the package
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "ok against" in r.stdout and str(Path("references", "quick", "static-34n.json")) in r.stdout
+    m = json.loads((out / "metrics.json").read_text())
+    (out / "metrics.json").write_text(json.dumps({**m, "scenario": "my-own"}))
+    r = cli("check", out, cwd=tmp_path)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "no reference for scenario 'my-own'" in r.stderr and "--reference" in r.stderr
+
+
+def test_check_tolerance_admits_one_run_moving_by_one_standard_deviation():
+    from fusionbench.check import compare
+
+    def metrics(rms, std=3.0):
+        stat = {"mean": 0.0, "std": std, "rms": rms, "max_abs": rms}
+        return {"runs": 3, "methods": {"m": {"final_error_arcmin": {ax: dict(stat) for ax in "ENU"},
+                                            "settling_time_s": {"U": {"mean": 10.0, "std": 0.0}}}}}
+
+    ref = metrics(1.0)  # allowed: 1.0 * 1.1 + max(0.05, 3.0 / 3) = 2.1 arcmin
+    assert compare(metrics(2.05), ref) == []
+    bad = compare(metrics(2.15), ref)
+    assert [(row[1], round(row[4], 6)) for row in bad] == [(f"final phi{ax} |rms| (arcmin)", 2.1) for ax in "ENU"]
+    assert compare(metrics(1.2), metrics(1.0, std=0.0))  # no spread: 10 % + 0.05 arcmin only
 
 
 def test_run_with_a_bad_scenario_file_writes_nothing(tmp_path):
