@@ -115,7 +115,8 @@ def _cmd_align(args):
 
 
 def _cmd_run(args):
-    from .report import write_index, write_scenario_report
+    from .overview import write_overview, write_page
+    from .report import write_scenario_report
     from .runner import run_scenario
 
     names = scenarios.builtin_names() if args.scenario == "all" else [args.scenario]
@@ -139,12 +140,14 @@ def _cmd_run(args):
                                              quick=args.quick, wall_s=wall)
         folder = out_dir / scn.name if args.scenario == "all" else out_dir
         path = write_scenario_report(res, folder)
-        outs.append(res)
+        write_page(path)
+        outs.append((scn, m, path))
         pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
         sys.stdout.flush()  # a log file gets the line when the scenario ends, not when the buffer fills
     pbar.close()
     if args.scenario == "all":
-        print(f"index: {write_index(out_dir, outs)} ({time.perf_counter() - start:.0f} s in all)")
+        wall = time.perf_counter() - start
+        print(f"overview: {write_overview(out_dir, outs, wall)} ({wall:.0f} s in all)")
     return 0
 
 

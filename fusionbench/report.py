@@ -1,4 +1,5 @@
-"""report.md and its figures (matplotlib, Agg backend) for a scenario run, and an index for several.
+"""report.md and its figures (matplotlib, Agg backend) for a scenario run (the overview of several:
+:mod:`fusionbench.overview`).
 
 Each scenario folder holds ``metrics.json``, ``report.md`` and PNG figures: the misalignment
 (E, N, U) against time for every method, Monte Carlo mean and the 1-sigma band, with the
@@ -403,6 +404,7 @@ azimuth = -east gyro bias / (earth rate cos L) + tan L east accelerometer bias /
 {_table(m)}
 
 Methods:
+
 {methods_desc}
 
 Level errors over the last 100 s, RMS over runs and time (arcmin):
@@ -425,18 +427,3 @@ Reproduce: `fusionbench run {m['scenario']} --runs {m['runs']} --seed {m['seed']
     with atomic_open(folder / "report.md") as fh:
         fh.write(text)
     return folder / "report.md"
-
-
-def write_index(folder, outs):
-    """An index.md over several scenario runs in sub-folders of ``folder``."""
-    folder = Path(folder)
-    lines = ["# fusionbench report", "", "| scenario | runs | methods | best final phiU rms (arcmin) | limit U (arcmin) |",
-             "|---|---|---|---|---|"]
-    for out in outs:
-        m = out.metrics
-        best = min(m["methods"].items(), key=lambda kv: kv[1]["final_error_arcmin"]["U"]["rms"])
-        lines.append(f"| [{m['scenario']}]({m['scenario']}/report.md) | {m['runs']} | {', '.join(m['methods'])} "
-                     f"| {best[1]['final_error_arcmin']['U']['rms']:.3f} ({best[0]}) | {m['limits_arcmin']['U']:.3f} |")
-    with atomic_open(folder / "index.md") as fh:
-        fh.write("\n".join(lines) + "\n")
-    return folder / "index.md"

@@ -1,0 +1,284 @@
+"""The overview of a ``fusionbench run``: ``index.html`` (one self-contained page) and ``index.md``.
+
+The page holds the scoreboard of every method across every scenario, each cell the figure its scenario is
+about (:func:`headline`), links to every scenario's page (``report.html``, an HTML rendering of its
+``report.md``, written beside it by :func:`write_page`) and the run's provenance. Figures are linked
+relatively, nothing is fetched from a network and the page needs no JavaScript: copy the folder anywhere.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import markdown
+
+from .io import atomic_open
+
+#: A cell within this factor of its column's best is drawn good, within POOR_FACTOR fair, beyond it poor.
+GOOD_FACTOR = 1.25
+POOR_FACTOR = 3.0
+
+_CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:2em auto;max-width:80em;padding:0 1em;
+color:#222;line-height:1.4}
+table{border-collapse:collapse;margin:1em 0;font-size:0.9em}
+th,td{border:1px solid #ccc;padding:0.3em 0.5em;text-align:right;vertical-align:top}
+th{background:#f3f3f3}
+td:first-child,th:first-child{text-align:left}
+.good{background:#d9f0d3}.fair{background:#fdf1c7}.poor{background:#f6d0cc}.none{color:#999}
+.scroll{overflow-x:auto}
+img{max-width:100%}
+.thumb{max-width:28em;border:1px solid #ddd}
+code{background:#f5f5f5;padding:0 0.2em}
+small{color:#555}
+"""
+
+
+@dataclass
+class Column:
+    """One scenario's column of the scoreboard: the figure it is about, per method.
+
+    ``values`` maps a method to ``(number, text)``: the number ranks the cell (smaller is better unless
+    ``higher_is_better``), the text is what a reader sees; ``number`` None leaves the cell unranked."""
+
+    scenario: str
+    kind: str
+    figure: str
+    note: str = ""
+    higher_is_better: bool = False
+    values: dict = field(default_factory=dict)
+
+
+def _rms_about(stat, centre):
+    """RMS over runs of (x - centre) from a figure's mean and standard deviation over runs."""
+    return float((stat["std"] ** 2 + (stat["mean"] - centre) ** 2) ** 0.5)
+
+
+def headline(kind, metrics, has_init=False):
+    """The scoreboard column of one scenario: the figure the scenario is about, for every method.
+
+    Parameters
+    ----------
+    kind : str
+        The scenario's kind (:data:`fusionbench.scenarios.KINDS`).
+    metrics : dict
+        The scenario's metrics.json content.
+    has_init : bool
+        Whether the methods start from a prescribed initial misalignment (the figure is then the settling time).
+
+    Returns
+    -------
+    Column
+        alignment: RMS over runs of the final azimuth error about the theoretical limit (arcmin), or the
+        azimuth settling time (s) from a prescribed initial error; a noise jump: the azimuth RMS inside the
+        jump window (arcmin); moving-alignment: the final azimuth RMS against the truth (arcmin);
+        navigation: the level RMSE in the scenario's window (arcmin, with the reduction in the note);
+        calibration: the coefficient groups within the paper's claim and the worst error over the claim;
+        conformance: claimed cells passed and the worst azimuth efficiency.
+    """
+    name, methods = metrics["scenario"], metrics["methods"]
+    if kind == "conformance":
+        col = Column(name, kind, "cells passed of claimed; worst azimuth efficiency (1 optimal)")
+        for meth, cells in metrics.get("cells", {}).items():
+            claimed = [c for c in cells.values() if c.get("status") not in ("not claimed", None)]
+            passed = sum(c["status"] == "pass" for c in claimed)
+            effs = [c["efficiency_U"] / c["efficiency_max"] for c in claimed if "efficiency_U" in c]
+            worst = max((c["efficiency_U"] for c in claimed if "efficiency_U" in c), default=None)
+            fail = len(claimed) - passed
+            text = f"{passed}/{len(claimed)}" + (f"; {worst:.2f}" if worst is not None else "")
+            col.values[meth] = (fail + max(effs, default=0.0), text) if claimed else (None, "claims none")
+        return col
+    if kind == "calibration":
+        col = Column(name, kind, "coefficient groups within the paper's claim; worst |mean error| / claim")
+        for meth, r in methods.items():
+            ratios = {g: v["max_abs_error_mean"] / v["paper_below"] for g, v in r.get("groups", {}).items()
+                      if v.get("paper_below")}
+            if not ratios:
+                col.values[meth] = (None, "no claim")
+                continue
+            worst = max(ratios, key=ratios.get)
+            within = sum(v <= 1.0 for v in ratios.values())
+            col.values[meth] = (ratios[worst], f"{within}/{len(ratios)}; {ratios[worst]:.3g} ({worst})")
+        return col
+    if kind == "navigation":
+        note = f"reduction {metrics['reduction_percent']:.1f} %" if "reduction_percent" in metrics else ""
+        col = Column(name, kind, "level RMSE in the window (arcmin)", note)
+        for meth, r in methods.items():
+            w = r.get("window_rmse_arcmin")
+            col.values[meth] = (w["level"], f"{w['level']:.3f}") if w else (None, "-")
+        return col
+    if any("jump" in r for r in methods.values()):
+        a, b = next(r["jump"]["window_s"] for r in methods.values() if "jump" in r)
+        col = Column(name, kind, f"phiU RMS in the jump window {a:g}-{b:g} s (arcmin)")
+        for meth, r in methods.items():
+            v = r.get("jump", {}).get("rms_arcmin", {}).get("during", {}).get("U")
+            col.values[meth] = (v, f"{v:.2f}") if v is not None else (None, "-")
+        return col
+    if kind == "moving-alignment":
+        col = Column(name, kind, "final phiU RMS against the truth (arcmin)")
+        for meth, r in methods.items():
+            v = r["final_error_arcmin"]["U"]["rms"]
+            col.values[meth] = (v, f"{v:.2f}")
+        return col
+    if has_init:
+        band = next(iter(methods.values()))["settling_time_s"]["band_arcmin"] if methods else 0
+        col = Column(name, kind, f"azimuth settling, mean (s, {band:g} arcmin band)")
+        for meth, r in methods.items():
+            v, frac = r["settling_time_s"]["U"]["mean"], r.get("settled_fraction_U", 1.0)
+            col.values[meth] = (v, f"{v:.0f}" + (f" ({frac:.0%} of runs settle)" if frac < 1 else ""))
+        return col
+    lim = metrics["limits_arcmin"]["U"]
+    col = Column(name, kind, "final phiU RMS about the limit (arcmin)", f"limit {lim:.2f} arcmin")
+    for meth, r in methods.items():
+        v = _rms_about(r["final_error_arcmin"]["U"], lim)
+        col.values[meth] = (v, f"{v:.2f}")
+    return col
+
+
+def grade(col, method):
+    """``good``, ``fair``, ``poor`` or ``none``: a cell against its column's best (GOOD_FACTOR, POOR_FACTOR);
+    a conformance cell is good when every claimed cell passed, poor otherwise; a calibration cell good within
+    the claim."""
+    value = col.values.get(method, (None, ""))[0]
+    if value is None:
+        return "none"
+    if col.kind == "conformance":
+        return "good" if value <= 1.0 else "poor"
+    if col.kind == "calibration":
+        return "good" if value <= 1.0 else "fair" if value <= POOR_FACTOR else "poor"
+    ranked = [v for v, _ in col.values.values() if v is not None]
+    best = max(ranked) if col.higher_is_better else min(ranked)
+    ratio = (best / value if value else float("inf")) if col.higher_is_better else (value / best if best else
+                                                                                    (1.0 if value == 0 else 10.0))
+    return "good" if ratio <= GOOD_FACTOR else "fair" if ratio <= POOR_FACTOR else "poor"
+
+
+def _methods(columns):
+    seen = {}
+    for col in columns:
+        for m in col.values:
+            seen.setdefault(m, None)
+    return list(seen)
+
+
+def _first_image(report_md):
+    found = re.search(r"!\[[^\]]*\]\(([^)\s]+)\)", Path(report_md).read_text(encoding="utf-8"))
+    return found.group(1) if found else None
+
+
+def _page(title, body):
+    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{html.escape(title)}</title>\n'
+            f"<style>{_CSS}</style>\n</head>\n<body>\n{body}\n</body>\n</html>\n")
+
+
+def write_page(report_md):
+    """Render a scenario's ``report.md`` as ``report.html`` beside it (same relative figure links); returns its path."""
+    report_md = Path(report_md)
+    text = report_md.read_text(encoding="utf-8")
+    body = markdown.markdown(text, extensions=["tables", "fenced_code"], output_format="html")
+    title = text.splitlines()[0].lstrip("# ").strip() if text else report_md.parent.name
+    nav = '<p><a href="../index.html">overview</a> · <a href="report.md">report.md</a> · ' \
+          '<a href="metrics.json">metrics.json</a></p>\n'
+    path = report_md.with_suffix(".html")
+    with atomic_open(path) as fh:
+        fh.write(_page(title, nav + body))
+    return path
+
+
+def _scoreboard_html(columns):
+    methods = _methods(columns)
+    head = "".join(f'<th><a href="{html.escape(c.scenario)}/report.html">{html.escape(c.scenario)}</a><br>'
+                   f"<small>{html.escape(c.figure)}" + (f"; {html.escape(c.note)}" if c.note else "") + "</small></th>"
+                   for c in columns)
+    rows = []
+    for m in methods:
+        cells = "".join(f'<td class="{grade(c, m)}">{html.escape(c.values[m][1])}</td>' if m in c.values else
+                        '<td class="none">·</td>' for c in columns)
+        rows.append(f"<tr><td><code>{html.escape(m)}</code></td>{cells}</tr>")
+    return (f'<div class="scroll"><table id="scoreboard">\n<tr><th>method</th>{head}</tr>\n' + "\n".join(rows)
+            + "\n</table></div>")
+
+
+def _provenance_rows(prov, wall_total):
+    if not prov:
+        return "<p>No provenance recorded.</p>"
+    items = [("fusionbench", prov.get("fusionbench")),
+             ("git commit", (prov.get("git_commit") or "not a checkout") + (" (uncommitted changes)" if prov.get("git_dirty")
+                                                                           else "")),
+             ("date (UTC)", prov.get("date_utc")), ("command", prov.get("command")),
+             ("seed", prov.get("seed")), ("size", "--quick" if prov.get("quick") else "default"),
+             ("wall time of the whole run", f"{wall_total:.0f} s" if wall_total is not None else None),
+             ("Python", prov.get("python")), ("platform", prov.get("platform")), ("CPUs", prov.get("cpus")),
+             ("libraries", ", ".join(f"{k} {v}" for k, v in (prov.get("libraries") or {}).items()))]
+    return "<table>\n" + "\n".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>"
+                                   for k, v in items if v is not None) + "\n</table>"
+
+
+def _scenario_sections(folder, entries):
+    parts = []
+    for scn_name, meta, report_md in entries:
+        rel = Path(report_md).relative_to(folder).parent.as_posix()
+        img = _first_image(report_md)
+        prov = meta.get("provenance", {})
+        wall = f", {prov['wall_s']:.0f} s" if "wall_s" in prov else ""
+        parts.append(f'<h3 id="{html.escape(scn_name)}"><a href="{rel}/report.html">{html.escape(scn_name)}</a></h3>\n'
+                     f"<p>{html.escape(meta.get('description', ''))}<br><small>{meta['runs']} runs of "
+                     f"{meta['duration_s']:.0f} s{wall} · <a href=\"{rel}/report.md\">report.md</a> · "
+                     f'<a href="{rel}/metrics.json">metrics.json</a></small></p>'
+                     + (f'\n<p><a href="{rel}/report.html"><img class="thumb" src="{rel}/{img}" '
+                        f'alt="{html.escape(scn_name)}: {html.escape(img)}"></a></p>' if img else ""))
+    return "\n".join(parts)
+
+
+def _scoreboard_md(columns):
+    methods = _methods(columns)
+    lines = ["| method | " + " | ".join(f"[{c.scenario}]({c.scenario}/report.md)" for c in columns) + " |",
+             "|---" * (len(columns) + 1) + "|",
+             "| *figure* | " + " | ".join(c.figure + (f"; {c.note}" if c.note else "") for c in columns) + " |"]
+    for m in methods:
+        lines.append(f"| `{m}` | " + " | ".join(c.values[m][1] if m in c.values else "" for c in columns) + " |")
+    return "\n".join(lines)
+
+
+def write_overview(folder, results, wall_total=None):
+    """Write ``index.html`` and ``index.md`` over the scenario folders of a run; returns the HTML path.
+
+    Parameters
+    ----------
+    folder : path
+        The run's output folder; each scenario's report is in ``folder/<scenario>/report.md``.
+    results : list of (scenario, metrics, report_md)
+        Per scenario: its :class:`fusionbench.scenarios.Scenario` (or conformance matrix), its metrics.json
+        content (with ``provenance``) and the path of its report.md.
+    wall_total : float, optional
+        Wall time of the whole run, s.
+    """
+    folder = Path(folder)
+    columns, entries = [], []
+    for scn, metrics, report_md in results:
+        columns.append(headline(getattr(scn, "kind", "alignment"), metrics,
+                                getattr(scn, "init_misalignment", None) is not None))
+        entries.append((metrics["scenario"], {"description": getattr(scn, "description", ""), **metrics}, report_md))
+        page = Path(report_md).with_suffix(".html")
+        if not page.exists():
+            write_page(report_md)
+    prov = results[0][1].get("provenance", {}) if results else {}
+    body = (f"<h1>fusionbench report</h1>\n<p>{len(columns)} scenarios, {len(_methods(columns))} methods. Each cell is "
+            "the figure its scenario is about (the column head names it); green within "
+            f"{GOOD_FACTOR:g}x of the column's best, amber within {POOR_FACTOR:g}x, red beyond (conformance: red when a "
+            "claimed cell failed; calibration: green within the paper's claim). A dot: the method was not run there. "
+            "Every scenario page has the table, the figures and the paper's figures beside ours.</p>\n"
+            f"<h2>Scoreboard</h2>\n{_scoreboard_html(columns)}\n<h2>Scenarios</h2>\n"
+            f"{_scenario_sections(folder, entries)}\n<h2>Provenance</h2>\n{_provenance_rows(prov, wall_total)}")
+    path = folder / "index.html"
+    with atomic_open(path) as fh:
+        fh.write(_page("fusionbench report", body))
+    md = ["# fusionbench report", "", "Scoreboard: each cell is the figure its scenario is about. The same as a page: "
+          "[index.html](index.html).", "", _scoreboard_md(columns), ""]
+    with atomic_open(folder / "index.md") as fh:
+        fh.write("\n".join(md))
+    return path
