@@ -126,6 +126,8 @@ def _cmd_run(args):
     outs = []
     # one bar for the whole command (scenarios x runs, elapsed and left) on a terminal; else a line per scenario
     total = sum(progress.expected_runs(scn, args.runs, args.quick) for scn in scns)
+    print(f"fusionbench run {args.scenario}: {len(scns)} scenario{'s' * (len(scns) > 1)}, {total} Monte Carlo runs"
+          f"{' (--quick size)' if args.quick else ''} into {out_dir}", flush=True)
     pbar = tqdm(total=total, unit="run", desc="fusionbench run", disable=not sys.stderr.isatty(), dynamic_ncols=True)
     start = time.perf_counter()
     for scn in scns:
