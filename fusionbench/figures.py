@@ -15,9 +15,12 @@ hands the method an initial attitude (a coarse stage of its own is skipped then)
 
 from __future__ import annotations
 
+import os
+import tempfile
 import textwrap
 import warnings
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import matplotlib
 
@@ -48,6 +51,26 @@ DECORATIONS = {"alignment": {"limit": True, "band": True},
                "navigation": {"limit": False, "band": False},
                "calibration": {"limit": False, "band": False},
                "conformance": {"limit": True, "band": True}}
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def save_png(fig, path):
+    """Save a matplotlib figure as PNG atomically and close it (mode 0666 less the umask, like any new file)."""
+    fd, tmp = tempfile.mkstemp(suffix=".png", dir=os.path.dirname(path) or ".")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600: unreadable to a colleague or a web server
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def decorations(kind):
@@ -86,7 +109,7 @@ def spread(values):
     """``(low, high)`` (M,) of ``values`` (R, M) over runs: the :data:`BAND_PERCENTILES` percentiles (one run: the
     run itself)."""
     values = np.asarray(values, dtype=float)
-    if values.shape[0] < 2:
+    if values.shape[0] < 2 or values.shape[1] == 0:
         return values[0], values[0]
     with warnings.catch_warnings():  # a time where every run is NaN (not drawn) stays NaN
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -230,14 +253,20 @@ def scenario_events(scn, duration_s):
                 ev.append(Event(t, t + seg.duration, f"manoeuvre, {np.linalg.norm(a):.3g} m/s^2"))
             t += seg.duration
     if getattr(scn, "platform", None) is not None:
-        from .calibration import _AXES
+        ev += scheme_events(scn.platform.scaled(duration_s).scheme)
+    return ev
 
-        names = {v: k for k, v in _AXES.items()}
-        t, segs = 0.0, scn.platform.scaled(duration_s).scheme.segments
-        for seg in segs:
-            axis = names.get(tuple(seg.axis), str(tuple(seg.axis)))
-            ev.append(Event(t, t + seg.duration, f"roll about {axis}", shade=False))
-            t += seg.duration
+
+def scheme_events(scheme):
+    """The roll phases of a platform's rolling scheme (:class:`fusionbench.platform.Scheme`) as unshaded spans."""
+    from .calibration import _AXES
+
+    names = {v: k for k, v in _AXES.items()}
+    ev, t = [], 0.0
+    for seg in scheme.segments:
+        ev.append(Event(t, t + seg.duration, f"roll about {names.get(tuple(seg.axis), str(tuple(seg.axis)))}",
+                        shade=False))
+        t += seg.duration
     return ev
 
 
@@ -292,6 +321,85 @@ def events_note(events, scale=1.0, unit="s"):
         who = f" ({', '.join(e.methods)})" if e.methods else ""
         parts.append(f"[{i}] {e.label}{who}, {when}")
     return "Events: " + "; ".join(parts) + "." if parts else ""
+
+
+def context(scn, metrics, times, bad=()):
+    """What every figure of a run shares: method names (those of ``times``, name to (M,) s) and colours, the
+    diverged methods ``bad`` (drawn apart), the events of the scenario and of the methods, the time unit, what the
+    scenario's kind draws (:func:`decorations`) and a title. Methods are instantiated through ``scn.method``."""
+    duration = metrics["duration_s"]
+    names = list(times)
+    methods = {}
+    for n in names:
+        try:
+            methods[n] = scn.method(n)
+        except ValueError:
+            continue
+    init_given = getattr(scn, "init_misalignment", None) is not None
+    events = scenario_events(scn, duration) + method_events(methods, init_given)
+    scale, unit = time_axis(duration)
+    return SimpleNamespace(names=names, t=dict(times), colors=colors(names), bad=list(bad), methods=methods,
+                           events=in_record(events, duration), scale=scale, unit=unit, deco=decorations(scn.kind),
+                           title=f"{metrics['scenario']} ({scn.kind}, {metrics['runs']} runs)")
+
+
+def small_multiples(c, rows, values, sharex=True):
+    """Small multiples: a row per ``rows`` item ``(key, ylabel, t_from_s, log, refs)`` x a column per method group;
+    ``values(name, key)`` gives (R, M) arrays (None: not drawn) drawn as median and band. The well-behaved columns
+    share each row's y range, what they span from ``t_from_s`` on and the ``refs`` ((y or (y0, y1), style,
+    label) lines and bands); diverged methods in the last column on their own scale. ``c`` is a :func:`context`.
+    Returns (fig, axes)."""
+    fig, axes, cols = panels(len(rows), c.names, c.bad, sharex=sharex)
+    for i, (key, ylabel, t_from, log, refs) in enumerate(rows):
+        keep = [np.ravel(y) for y, _, _ in refs] + ([] if log else [np.zeros(1)])  # the truth in view
+        span, sizes, own = [], [], []
+        for j, col in enumerate(cols):
+            ax = axes[i, j]
+            for n in col:
+                v = values(n, key)
+                if v is None:
+                    continue
+                median_band(ax, c.t[n] / c.scale, v, c.colors[n], n)
+                (own if n in c.bad else span).extend(spread(v[:, c.t[n] >= t_from]))
+                if n not in c.bad:
+                    sizes.append(error_size(c.t[n], v))
+            ax.set_yscale("log" if log else "linear")
+            if log:
+                plain_log_ticks(ax)
+            else:
+                ax.axhline(0.0, color="0.6", lw=0.6)
+            for y, style, label in refs:
+                if style == "band":
+                    ax.axhspan(y[0], y[1], color="k", alpha=0.07, lw=0, label=label)
+                else:
+                    ax.axhline(y, color="k", ls=style, lw=1, label=label)
+            mark_events(ax, c.events, c.scale, col, numbers=i == 0)
+            ax.grid(alpha=0.3, which="both" if log else "major")
+            ax.set_ylabel(ylabel if j == 0 or (c.bad and j == len(cols) - 1) else "", fontsize=9)
+        cap = np.inf if log or not sizes else \
+            CLIP_FACTOR * reference_size(sizes, DIVERGENCE_FLOOR_ARCMIN) + np.max(np.abs(np.concatenate(keep)))
+        lim = clip_limits(span, log=log, cap=cap, keep=keep)
+        for j, col in enumerate(cols):
+            if lim is not None and not set(col) & set(c.bad):
+                axes[i, j].set_ylim(lim)
+        if c.bad and own:  # the diverged ones: their own range, from t_from on too
+            axes[i, -1].set_ylim(clip_limits(own, log=log, keep=keep))
+    for j in range(axes.shape[1]):
+        axes[0, j].legend(fontsize=7, loc="best")
+        axes[-1, j].set_xlabel(f"time ({c.unit})")
+    top = set(axes[0, 0].get_legend_handles_labels()[1])
+    for i in range(1, len(rows)):  # lines of reference below the first row: their own legend
+        hl = [(h, lab) for h, lab in zip(*axes[i, 0].get_legend_handles_labels()) if lab not in c.names]
+        if hl and {lab for _, lab in hl} - top:
+            axes[i, 0].legend(*zip(*hl), fontsize=7, loc="best")
+    return fig, axes
+
+
+def notes(c, extra=""):
+    """The paragraphs under a run's figure: its events, ``extra``, and which methods are drawn apart."""
+    bad = (f"Diverged (error at the end over {DIVERGENCE_FACTOR:g} times the better half's): "
+           f"{', '.join(c.bad)}, drawn apart on its own scale." if c.bad else "")
+    return [events_note(c.events, c.scale, c.unit), extra, bad]
 
 
 def finish(fig, title, notes=(), fontsize=10):
