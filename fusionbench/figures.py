@@ -174,6 +174,20 @@ def diverged(sizes, floor):
     return [n for n, s in zip(sizes, S) if np.any(s > DIVERGENCE_FACTOR * ref)]
 
 
+def diverged_histories(histories, floor=DIVERGENCE_FLOOR_ARCMIN):
+    """:func:`diverged` of error histories: name to ``(t (M,) s, err (R, M, n_axes))``, sizes per axis by
+    :func:`error_size` (``floor`` in the unit of ``err``, arcmin by default)."""
+    return diverged({n: [error_size(t, e[..., i]) for i in range(e.shape[-1])] for n, (t, e) in histories.items()},
+                    floor)
+
+
+def series_label(methods, key):
+    """The axis label of a reported series ``key``: from the first method object (of ``methods``, name to object)
+    whose optional ``series_labels`` mapping names it; else the key itself."""
+    return next((m.series_labels[key] for m in methods.values() if key in getattr(m, "series_labels", {})),
+                f"{key} (as reported)")
+
+
 def clip_limits(curves, pad=0.08, log=False, cap=np.inf, keep=()):
     """Limits ``(lo, hi)`` of an axis spanning the finite values of ``curves`` (arrays) within +-``cap`` and the
     values ``keep`` (always in view), padded by ``pad`` of the span on each side (``log``: of the decades,

@@ -20,9 +20,8 @@ from .runner import write_metrics
 
 
 def _diverged(out):
-    """Names of the methods whose misalignment diverges (:func:`fusionbench.figures.diverged`, arcmin)."""
-    sizes = {n: [fg.error_size(oc.t, oc.phi[..., i] / units.ARCMIN) for i in range(3)] for n, oc in out.outcomes.items()}
-    return fg.diverged(sizes, fg.DIVERGENCE_FLOOR_ARCMIN)
+    """Names of the methods whose misalignment diverges (:func:`fusionbench.figures.diverged_histories`)."""
+    return fg.diverged_histories({n: (oc.t, oc.phi / units.ARCMIN) for n, oc in out.outcomes.items()})
 
 
 def _context(out):
@@ -78,7 +77,7 @@ def level_figure(out, path):
     scenario's RMSE window shaded and the events marked (like seed 004's Figs. 9-11). Returns the Figure."""
     c = _context(out)
     fig, axes = fg.small_multiples(c, [(i, f"phi{'EN'[i]} (arcmin)", 0.0, False, []) for i in range(2)],
-                      lambda n, i: out.outcomes[n].phi[..., i] / units.ARCMIN)
+                                   lambda n, i: out.outcomes[n].phi[..., i] / units.ARCMIN)
     win = out.scenario.rmse_window_s
     if win is not None:
         for ax in axes.ravel():
@@ -97,10 +96,8 @@ def series_figure(out, path):
     keys = list(dict.fromkeys(k for oc in out.outcomes.values() for k in oc.extra.get("series", {})))
     c.names = [n for n in c.names if out.outcomes[n].extra.get("series")]
     c.bad = []
-    labels = [next((getattr(m, "series_labels", {}).get(k) for m in c.methods.values()
-                    if getattr(m, "series_labels", {}).get(k)), f"{k} (as reported)") for k in keys]
-    fig, _ = fg.small_multiples(c, [(k, lab, 0.0, False, []) for k, lab in zip(keys, labels)],
-                   lambda n, k: out.outcomes[n].extra["series"].get(k))
+    fig, _ = fg.small_multiples(c, [(k, fg.series_label(c.methods, k), 0.0, False, []) for k in keys],
+                                lambda n, k: out.outcomes[n].extra["series"].get(k))
     fg.finish(fig, f"{c.title}: series reported by the methods, median over runs", fg.notes(c))
     save_png(fig, path)
     return fig
@@ -228,17 +225,13 @@ def _limit_text(kind):
             "neither a limit nor a settling band.")
 
 
-def _calibration_context(out):
-    return fg.context(out.scenario, out.metrics, {n: out.t for n in out.outcomes})
-
-
 def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y", "K1_Y", "A_YX", "KT_X")):
     """Run 0's estimates of a few coefficients against truth (customary units): the final pass with its 3-sigma
     envelope shaded; for a multi-pass method its causal first pass too (the convergence a real-time filter shows)
     as a line with its envelope dotted, unshaded; the scheme's roll phases marked. Returns the Figure."""
     from . import platform as pf
 
-    c = _calibration_context(out)
+    c = fg.context(out.scenario, out.metrics, dict.fromkeys(out.outcomes, out.t))
     fig, axes = plt.subplots(len(names) // 2, 2, figsize=(10, 1.2 + 2.2 * (len(names) // 2)), sharex=True)
     t = out.t / c.scale
     for name, oc in out.outcomes.items():
@@ -273,7 +266,7 @@ def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y"
 def attitude_figure(out, path):
     """Platform attitude error (E, N, U, arcsec, log), rms over runs, of every method and of a multi-pass method's
     causal first pass (dashed), the scheme's roll phases marked. Returns the Figure."""
-    c = _calibration_context(out)
+    c = fg.context(out.scenario, out.metrics, dict.fromkeys(out.outcomes, out.t))
     fig, axes = plt.subplots(3, 1, figsize=(8.5, 7.6), sharex=True)
     for name, oc in out.outcomes.items():
         for i, ax in enumerate(axes):
