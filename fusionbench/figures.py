@@ -369,11 +369,11 @@ def small_multiples(c, rows, values, sharex=True):
         span, sizes, own = [], [], []
         for j, col in enumerate(cols):
             ax = axes[i, j]
-            for n in col:
+            for k, n in enumerate(col):
                 v = values(n, key)
                 if v is None:
-                    continue
-                median_band(ax, c.t[n] / c.scale, v, c.colors[n], n)
+                    continue  # later lines thinner: one that coincides with an earlier one leaves its edges in view
+                median_band(ax, c.t[n] / c.scale, v, c.colors[n], n, lw=max(0.8, 2.0 - 0.3 * k))
                 (own if n in c.bad else span).extend(spread(v[:, c.t[n] >= t_from]))
                 if n not in c.bad:
                     sizes.append(error_size(c.t[n], v))

@@ -64,8 +64,10 @@ def azimuth_figure(out, path):
         return np.where(out.outcomes[n].t >= t0, u, np.nan)
 
     fig, axes = fg.small_multiples(c, rows, values, sharex=False)
-    for ax in axes[1]:
-        ax.set_xlim(left=t0 / c.scale)
+    end = out.metrics["duration_s"] / c.scale
+    for top, zoom in zip(*axes):  # every panel of a row over the same times
+        top.set_xlim(-0.02 * end, 1.02 * end)
+        zoom.set_xlim(t0 / c.scale, 1.02 * end)
     fg.finish(fig, f"{c.title}: azimuth error; above: rms over runs, whole record; below: median and 16-84 % band "
               f"from {t0 / c.scale:g} {c.unit}", fg.notes(c))
     save_png(fig, path)
