@@ -267,6 +267,10 @@ class ADRCGyrocompass:
             defaults.update(beta01=3 * w, beta02=3 * w**2 * self.delta**0.5, beta03=w**3 * self.delta**0.75)
         return {k: (defaults[k] if v is None else v) for k, v in self._given.items()}
 
+    def events(self, init_given):
+        """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (eqs. 17-18)."""
+        return [(float(self.shot_s), "azimuth shot")]
+
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
         check_azimuth_observable(self.spec, site, self.name)

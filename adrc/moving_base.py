@@ -515,6 +515,11 @@ class ESOTDAligner:
         """The fal linear zones (east, north) used with step ``h``: ``delta1``, ``delta2`` or 2 h."""
         return tuple(2.0 * h if d is None else float(d) for d in self._delta)
 
+    def events(self, init_given):
+        """Stages for the figures (:mod:`fusionbench.figures`): the hand-over from the own inertial-frame coarse
+        alignment at ``coarse_s`` (s), when no initial attitude is given."""
+        return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
+
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a moving base with a velocity reference, or on a static or swaying base
         without one; see the module docstring.

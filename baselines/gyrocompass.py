@@ -108,6 +108,11 @@ class PIDGyrocompass:
             raise ValueError(f"compass_stages: expected (start_s, level_td_s, azimuth_td_s) in increasing start order, "
                              f"found {compass_stages}")
 
+    def events(self, init_given):
+        """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (the attitude turned by the
+        fitted azimuth) and the closing of the compass loop."""
+        return [(float(self.shot_s), "azimuth shot"), (self.compass_stages[0][0], "compass loop closed")]
+
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
         check_azimuth_observable(self.spec, site, self.name)

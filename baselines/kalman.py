@@ -123,6 +123,11 @@ class KalmanAligner:
         self.coarse_s = float(coarse_s)
         self.min_duration_s = self.coarse_s + 10.0
 
+    def events(self, init_given):
+        """Stages for the figures (:mod:`fusionbench.figures`): the hand-over from the own coarse alignment at
+        ``coarse_s`` (s), when no initial attitude is given."""
+        return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
+
     # ---------------------------------------------------------------- noise model
     def _qc(self):
         g, a = self.spec.gyro, self.spec.accel

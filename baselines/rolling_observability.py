@@ -380,11 +380,12 @@ FIGURE_GROUPS = (
 )
 
 
-def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGURE_GROUPS):
+def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGURE_GROUPS, events=()):
     """Draw output sensitivity curves, one panel per group of states, and save a PNG.
 
     Each panel shows, for each state of the group, the sensitivity of the output it drives most
-    (the X, Y or Z accelerometer with the largest peak), in ug per prior sigma against time in s.
+    (the X, Y or Z accelerometer with the largest peak): the change of that output, in ug, that an initial
+    error of one prior standard deviation of the state causes, against time (s, or h beyond 2 h).
 
     Parameters
     ----------
@@ -395,16 +396,18 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
     names : list of str, optional
         State names, default :data:`ERROR_STATE_NAMES`.
     path : str or path-like
-        PNG file written (atomically, :func:`fusionbench.report.save_png`).
+        PNG file written (atomically, :func:`fusionbench.figures.save_png`).
     groups : sequence of (title, list of names), optional
         Panels; default :data:`FIGURE_GROUPS`.
+    events : sequence of fusionbench.figures.Event, optional
+        Marked on the time axis (e.g. :func:`fusionbench.figures.scheme_events`, the roll phases).
 
     Returns
     -------
     str
         The path written.
     """
-    from fusionbench.report import plt, save_png  # Agg backend set there
+    from fusionbench import figures as fg  # matplotlib only when a figure is drawn
 
     t = np.asarray(times, dtype=float)
     S = np.asarray(S, dtype=float)
@@ -417,17 +420,22 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
         for m in members:
             if m not in names:
                 raise ValueError(f"groups: state {m!r} of panel {title!r} is not in names")
-    fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.4 * len(groups)), sharex=True, squeeze=False)
-    for ax, (title, members) in zip(axes[:, 0], groups):
+    scale, unit = fg.time_axis(t[-1] if t.size else 0.0)
+    events = fg.in_record(events, t[-1]) if t.size else []
+    fig, axes = fg.plt.subplots(len(groups), 1, figsize=(8.5, 1.4 + 2.4 * len(groups)), sharex=True, squeeze=False)
+    for k, (ax, (title, members)) in enumerate(zip(axes[:, 0], groups)):
         for m in members:
             col = S[:, :, names.index(m)] / units.UG
             out = int(np.argmax(np.abs(col).max(axis=0)))
-            ax.plot(t, col[:, out], lw=1.0, label=f"{m} -> {'XYZ'[out]} acc")
-        ax.set_title(title, fontsize=9)
-        ax.set_ylabel("ug / sigma")
+            ax.plot(t / scale, col[:, out], lw=1.0, label=f"{m} -> {'XYZ'[out]} accelerometer")
+        ax.set_title(title, fontsize=9, loc="left")
+        ax.set_ylabel("output change (ug)\nper prior sigma", fontsize=9)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left", ncol=2)
-    axes[-1, 0].set_xlabel("time, s")
-    fig.tight_layout()
-    save_png(fig, str(path))
+        ax.legend(fontsize=7, loc="best", ncol=2)
+        fg.mark_events(ax, events, scale, numbers=k == 0)
+    axes[-1, 0].set_xlabel(f"time ({unit})")
+    fg.finish(fig, "Output sensitivity along the rolling scheme (seed 002 Figs. 4-7): the change of an accelerometer "
+              "output caused by an initial error of one prior sigma of each coefficient",
+              [fg.events_note(events, scale, unit)])
+    fg.save_png(fig, str(path))
     return str(path)

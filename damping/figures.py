@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fusionbench.report import save_png  # noqa: E402
+from fusionbench.figures import save_png  # noqa: E402
 
 from . import network, qmap  # noqa: E402
 
@@ -27,8 +27,8 @@ def damping_ratio_figure(path):
     ax.plot(q, [network.damping_from_peak(v) for v in q], label="resonant peak Mr = 1/(2 xi sqrt(1 - xi^2))")
     ax.plot(q, [network.damping_from_poles(v) for v in q], label="least-damped closed-loop poles")
     ax.plot(q, network.paper_fit(q), "k--", label="paper's fit xi = 0.09 (q - 1), eq. 6")
-    ax.set_xlabel("network coefficient q")
-    ax.set_ylabel("damping ratio xi")
+    ax.set_xlabel("network coefficient q (dimensionless)")
+    ax.set_ylabel("damping ratio xi (dimensionless)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("Damping ratio of the north level loop against q (Fig. 4)", fontsize=10)
@@ -43,16 +43,17 @@ def accel_error_figure(path, max_error_deg=0.03):
     fig, ax = plt.subplots(figsize=(6, 4))
     for q in (2.0, 3.0, 5.0, 6.56):
         e1 = network.simulated_peak_error(1.0, q)  # linear in the acceleration
-        (line,) = ax.plot(a, np.degrees(a * e1), label=f"q = {q:g}: lsim of eq. 2")
         xi = network.damping_from_poles(q)
-        ax.plot(a, np.degrees(network.peak_attitude_error(a, xi)), "--", color=line.get_color(),
-                label=f"eq. 10, xi = {xi:.2f}")
-    ax.axhline(max_error_deg, color="k", lw=1, label=f"{max_error_deg:g} deg")
+        (line,) = ax.plot(a, np.degrees(a * e1), label=f"q = {q:g} (pole damping xi = {xi:.2f})")
+        ax.plot(a, np.degrees(network.peak_attitude_error(a, xi)), "--", color=line.get_color())
+    ax.plot([], [], "k-", lw=1, label="solid: lsim of eq. 2 with the actual H(s)")
+    ax.plot([], [], "k--", lw=1, label="dashed: eq. 10 with that xi")
+    ax.axhline(max_error_deg, color="k", lw=1.5, ls=":", label=f"{max_error_deg:g} deg, the map's target")
     ax.set_xlabel("acceleration step (m/s^2)")
     ax.set_ylabel("peak attitude error (deg)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    ax.set_title("Attitude error from an acceleration step (Fig. 5)", fontsize=10)
+    ax.legend(fontsize=7)
+    ax.set_title("Peak attitude error from an acceleration step (Fig. 5)", fontsize=10)
     fig.tight_layout()
     save_png(fig, path)
 
@@ -66,7 +67,7 @@ def qmap_figure(path, qm, max_error_deg=0.03):
     ax.semilogx(a, q, ".", ms=3, label="training data: simulated eq. 2 (Fig. 6)")
     ax.semilogx(fine, qm(fine), label=f"RBF map, clipped to [1, 7] (Fig. 8); held-out MSE {qm.mse_:.2g}")
     ax.set_xlabel("acceleration (m/s^2)")
-    ax.set_ylabel("network coefficient q")
+    ax.set_ylabel("network coefficient q (dimensionless)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(f"Acceleration -> q keeping the peak error at {max_error_deg:g} deg", fontsize=10)

@@ -140,6 +140,13 @@ class DampedNavigator:
         """The acceleration -> q map (:class:`damping.qmap.QMap`)."""
         return qmap.QMap.load(self.qmap_path) if self.qmap_path else default_map(self.max_error_deg)
 
+    def events(self, init_given):
+        """Stages for the figures (:mod:`fusionbench.figures`), s: the network switched in at ``damp_from_s``."""
+        return [] if self.scheme == "undamped" else [(self.damp_from_s, "damping network switched in")]
+
+    #: Axis labels of the series of :meth:`align` for the figures (q is a pure number).
+    series_labels = {"q_E": "q_E, east velocity (1 = off)", "q_N": "q_N, north velocity (1 = off)"}
+
     def align(self, imu: IMUData, site, vref=None, init=None) -> AlignmentResult:
         """Navigate R recordings from the initial attitude ``init``, at rest at ``site``.
 

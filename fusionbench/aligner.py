@@ -254,8 +254,10 @@ class Aligner(Protocol):
     ``min_duration_s`` is the shortest recording the method accepts, s. Optional attributes:
     ``supports`` (a :class:`Supports`: the bases and latitudes it claims; default static and sway up to
     80 deg), ``causal`` (default True; False for a smoother, whose every estimate uses the whole record:
-    its settling is then measured on growing prefixes) and, for methods that use an IMU noise model, an
-    ``imu`` constructor option (:func:`uses_noise_model`).
+    its settling is then measured on growing prefixes), for methods that use an IMU noise model, an
+    ``imu`` constructor option (:func:`uses_noise_model`), and for the report: ``events(init_given)`` (its own
+    stages, e.g. a coarse hand-over, as ``[(t_s, label)]`` or ``[(t0_s, t1_s, label)]``: :mod:`fusionbench.figures`),
+    ``series_labels`` (axis labels with units of the series in ``extra["series"]``) and ``report_figures(folder)``.
     """
 
     name: str

@@ -11,8 +11,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 
+from . import figures as fg  # noqa: E402
+from .figures import save_png  # noqa: E402
 from .io import atomic_open  # noqa: E402
-from .report import save_png, write_metrics  # noqa: E402
+from .runner import write_metrics  # noqa: E402
 
 
 def _cell_text(c):
@@ -26,7 +28,8 @@ def _cell_text(c):
 
 def scoreboard_figure(m, path):
     """Conditions (rows) x methods (columns), coloured by efficiency over the method's threshold (log scale:
-    green below 1, red above); R: refused, blank: not claimed; each passing cell shows its efficiency."""
+    green below 1, red above); R: refused, blank: not claimed; each passing cell shows its efficiency.
+    Returns the Figure."""
     conds, methods = list(m["conditions"]), list(m["cells"])
     ratio = np.full((len(conds), len(methods)), np.nan)
     for j, n in enumerate(methods):
@@ -34,7 +37,7 @@ def scoreboard_figure(m, path):
             cell = m["cells"][n].get(c, {"status": "not claimed"})
             if "efficiency_U" in cell and not cell.get("refused"):
                 ratio[i, j] = cell["efficiency_U"] / cell["efficiency_max"]
-    fig, ax = plt.subplots(figsize=(1.0 + 0.85 * len(methods), 1.2 + 0.38 * len(conds)))
+    fig, ax = plt.subplots(figsize=(max(7.5, 3.8 + 0.85 * len(methods)), 2.0 + 0.38 * len(conds)))
     im = ax.imshow(np.clip(ratio, 0.1, 10.0), cmap="RdYlGn_r", norm=LogNorm(0.1, 10.0), aspect="auto")
     for i, c in enumerate(conds):
         for j, n in enumerate(methods):
@@ -43,19 +46,23 @@ def scoreboard_figure(m, path):
                 continue
             txt = ("R" if cell["status"] == "pass" else "R!") if cell.get("refused") else f"{cell['efficiency_U']:.2g}"
             if cell["status"] == "fail":
-                txt += "\n✗"
+                txt += " ✗"
                 ax.add_patch(plt.Rectangle((j - 0.46, i - 0.44), 0.92, 0.88, fill=False, ec="crimson", lw=1.5))
             ax.text(j, i, txt, ha="center", va="center", fontsize=7)
     ax.set_xticks(range(len(methods)), methods, rotation=45, ha="right", fontsize=8)
     ax.set_yticks(range(len(conds)), conds, fontsize=8)
-    cb = fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02)
-    cb.set_label("efficiency / threshold (1: the pass line)", fontsize=8)
+    ax.set_xlabel("method", fontsize=9)
+    ax.set_ylabel("condition (base, latitude, heading, IMU grade)", fontsize=9)
+    cb = fig.colorbar(im, ax=ax, fraction=0.08, pad=0.03, aspect=30)
+    cb.set_ticks([0.1, 0.3, 1.0, 3.0, 10.0], labels=["0.1", "0.3", "1", "3", "10"])
+    cb.set_label("efficiency / the method's threshold (1: the pass line; dimensionless)", fontsize=8)
     sb = m["scoreboard"]
-    ax.set_title(f"{m['scenario']}, {m['runs']} runs per cell: azimuth efficiency\n(RMS over runs of final error "
-                 f"minus limit, over the attainable bound)\n{sb['passed']} of {sb['total']} cells pass; red box: fails "
-                 f"(efficiency or level), R: refused, blank: not claimed", fontsize=8)
-    fig.tight_layout()
+    fg.finish(fig, f"{m['scenario']}: azimuth efficiency, {m['runs']} runs per cell; {sb['passed']} of "
+              f"{sb['total']} cells pass", ["Efficiency: RMS over runs of (final azimuth error - limit) over the "
+                                            "attainable bound (1 is optimal). Red box: fails (efficiency or level); "
+                                            "R: refused; blank: not claimed."])
     save_png(fig, path)
+    return fig
 
 
 def write_report(out, folder):

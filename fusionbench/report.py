@@ -2,135 +2,108 @@
 :mod:`fusionbench.overview`).
 
 Each scenario folder holds ``metrics.json``, ``report.md`` and PNG figures: the misalignment
-(E, N, U) against time for every method, Monte Carlo mean and the 1-sigma band, with the
-theoretical limits drawn as dashed lines.
+(E, N, U) against time for every method, the median over runs with a 16-84 % band, at most five methods a
+panel, a diverged method apart, the events of the run marked, and the theoretical limit dashed where the
+scenario's kind gives it a meaning (the helpers: :mod:`fusionbench.figures`).
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from . import units  # noqa: E402
-from .io import atomic_open  # noqa: E402
-from .runner import write_metrics  # noqa: E402
+from . import figures as fg
+from . import units
+from .figures import plt, save_png  # noqa: F401 (plt, save_png: used by the methods' own figures)
+from .io import atomic_open
+from .runner import write_metrics
 
 
-def _umask():
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+def _diverged(out):
+    """Names of the methods whose misalignment diverges (:func:`fusionbench.figures.diverged_histories`)."""
+    return fg.diverged_histories({n: (oc.t, oc.phi / units.ARCMIN) for n, oc in out.outcomes.items()})
 
 
-def save_png(fig, path):
-    """Save a matplotlib figure as PNG atomically and close it (mode 0666 less the umask, like any new file)."""
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=os.path.dirname(path) or ".")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600: unreadable to a colleague or a web server
-        os.replace(tmp, path)
-    finally:
-        plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+def _context(out):
+    return fg.context(out.scenario, out.metrics, {n: oc.t for n, oc in out.outcomes.items()}, _diverged(out))
 
 
 def error_figure(out, path):
-    """Misalignment vs time, one panel per axis (arcmin), every method, limits dashed."""
-    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    """Misalignment (E, N, U, arcmin) against time: per method the median over runs and the 16-84 percentile
+    band; a diverged method apart; the stationary limit dashed only for the alignment kind; the y range is
+    what the other methods span after ``zoom_from_s`` (the whole record for navigation). Returns the Figure."""
+    c = _context(out)
     lim = out.limits / units.ARCMIN
-    for name, oc in out.outcomes.items():
-        phi = oc.phi / units.ARCMIN
-        mean, std = phi.mean(axis=0), phi.std(axis=0)
-        for i, ax in enumerate(axes):
-            (line,) = ax.plot(oc.t, mean[:, i], label=name)
-            ax.fill_between(oc.t, mean[:, i] - std[:, i], mean[:, i] + std[:, i], color=line.get_color(), alpha=0.2)
-    for i, ax in enumerate(axes):
-        ax.axhline(lim[i], color="k", ls="--", lw=1, label="limit" if i == 0 else None)
-        ax.set_ylabel(f"phi{'ENU'[i]} (arcmin)")
-        ax.grid(alpha=0.3)
-        # symmetric-log scale: large initial errors and arcsecond-level settling on one axis
-        ax.set_yscale("symlog", linthresh=max(0.1, 2 * abs(lim[i])))
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("time (s)")
-    fig.suptitle(f"{out.metrics['scenario']}: misalignment, Monte Carlo mean and 1-sigma ({out.metrics['runs']} runs)")
-    fig.tight_layout()
+    t_from = 0.0 if out.scenario.kind == "navigation" else out.scenario.zoom_from_s
+    rows = [(i, f"phi{'ENU'[i]} (arcmin)", t_from, False, [(lim[i], "--", "limit")] if c.deco["limit"] else [])
+            for i in range(3)]
+    fig, _ = fg.small_multiples(c, rows, lambda n, i: out.outcomes[n].phi[..., i] / units.ARCMIN)
+    clip = f"Vertical range: what the methods span from {t_from / c.scale:g} {c.unit} on; earlier transients leave it." \
+        if t_from > 0 else ""
+    fg.finish(fig, f"{c.title}: misalignment against the truth, median over runs and 16-84 % band",
+              fg.notes(c, clip))
     save_png(fig, path)
+    return fig
 
 
 def azimuth_figure(out, path):
-    """Azimuth error vs time for every method (like seed 000's Figs. 3 and 4): above, the RMS over
-    runs on a log scale (no wrap-around near 180 deg); below, mean and 1 sigma from the scenario's
-    ``zoom_from_s``, with the limit and the settling band."""
-    fig, (full, zoom) = plt.subplots(2, 1, figsize=(8, 7))
-    lim = out.limits[2] / units.ARCMIN
+    """Azimuth error against time (like seed 000's Figs. 3 and 4): above, the RMS over runs on a log scale over
+    the whole record; below, from the scenario's ``zoom_from_s``, median and 16-84 % band, with the limit and the
+    settling band where they apply (alignment kind). Returns the Figure."""
+    c = _context(out)
     t0 = out.scenario.zoom_from_s
-    band = out.scenario.settling_band_arcmin
-    for name, oc in out.outcomes.items():
-        u = oc.phi[..., 2] / units.ARCMIN
-        (line,) = full.semilogy(oc.t, np.sqrt(np.mean(u**2, axis=0)), label=name)
-        sel = oc.t >= t0
-        mean, std = u[:, sel].mean(axis=0), u[:, sel].std(axis=0)
-        zoom.plot(oc.t[sel], mean, color=line.get_color(), label=name)
-        zoom.fill_between(oc.t[sel], mean - std, mean + std, color=line.get_color(), alpha=0.2)
-    full.axhline(abs(lim), color="k", ls="--", lw=1, label="|limit|")
-    full.set_ylabel("rms |phiU| (arcmin)")
-    zoom.axhline(lim, color="k", ls="--", lw=1, label="limit")
-    zoom.axhspan(lim - band, lim + band, color="k", alpha=0.06, label=f"limit +- {band:g} arcmin")
-    zoom.set_ylabel("phiU (arcmin)")
-    zoom.set_xlabel("time (s)")
-    for ax in (full, zoom):
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
-    full.set_title(f"{out.metrics['scenario']}: azimuth error, {out.metrics['runs']} runs\n"
-                   f"above: rms over runs; below: mean and 1 sigma from {t0:g} s", fontsize=10)
-    fig.tight_layout()
+    lim, band = out.limits[2] / units.ARCMIN, out.scenario.settling_band_arcmin
+    rows = [("rms", "rms over runs of |phiU| (arcmin)", 0.0, True, [(abs(lim), "--", "|limit|")] * c.deco["limit"]),
+            ("zoom", "phiU (arcmin)", t0, False, [(lim, "--", "limit")] * c.deco["limit"]
+             + [((lim - band, lim + band), "band", f"limit +- {band:g} arcmin")] * c.deco["band"])]
+
+    def values(n, row):
+        u = out.outcomes[n].phi[..., 2] / units.ARCMIN
+        if row == "rms":
+            return np.sqrt(np.mean(u**2, axis=0))[None]
+        return np.where(out.outcomes[n].t >= t0, u, np.nan)
+
+    fig, axes = fg.small_multiples(c, rows, values, sharex=False)
+    end = out.metrics["duration_s"] / c.scale
+    for top, zoom in zip(*axes):  # every panel of a row over the same times
+        top.set_xlim(-0.02 * end, 1.02 * end)
+        zoom.set_xlim(t0 / c.scale, 1.02 * end)
+    fg.finish(fig, f"{c.title}: azimuth error; above: rms over runs, whole record; below: median and 16-84 % band "
+              f"from {t0 / c.scale:g} {c.unit}", fg.notes(c))
     save_png(fig, path)
+    return fig
 
 
 def level_figure(out, path):
-    """Level misalignment (phiE, phiN, arcmin) against time in hours, Monte Carlo mean of every method, with
-    the scenario's RMSE window shaded (like seed 004's Figs. 9-11)."""
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    for name, oc in out.outcomes.items():
-        mean = oc.phi.mean(axis=0) / units.ARCMIN
-        for i, ax in enumerate(axes):
-            ax.plot(oc.t / 3600.0, mean[:, i], lw=1, label=name)
+    """Level misalignment (phiE, phiN, arcmin) against time, median and 16-84 % band of every method, with the
+    scenario's RMSE window shaded and the events marked (like seed 004's Figs. 9-11). Returns the Figure."""
+    c = _context(out)
+    fig, axes = fg.small_multiples(c, [(i, f"phi{'EN'[i]} (arcmin)", 0.0, False, []) for i in range(2)],
+                                   lambda n, i: out.outcomes[n].phi[..., i] / units.ARCMIN)
     win = out.scenario.rmse_window_s
-    for i, ax in enumerate(axes):
-        if win is not None:
-            ax.axvspan(win[0] / 3600.0, win[1] / 3600.0, color="k", alpha=0.08,
-                       label="RMSE window" if i == 0 else None)
-        ax.set_ylabel(f"phi{'EN'[i]} (arcmin)")
-        ax.grid(alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("time (h)")
-    fig.suptitle(f"{out.metrics['scenario']}: level errors, mean of {out.metrics['runs']} runs", fontsize=10)
-    fig.tight_layout()
+    if win is not None:
+        for ax in axes.ravel():
+            ax.axvspan(win[0] / c.scale, win[1] / c.scale, color="tab:blue", alpha=0.08, lw=0)
+    fg.finish(fig, f"{c.title}: level errors, median over runs and 16-84 % band",
+              fg.notes(c, "" if win is None else f"Blue: the RMSE window, {win[0] / c.scale:.4g} to "
+                    f"{win[1] / c.scale:.4g} {c.unit}."))
     save_png(fig, path)
+    return fig
 
 
 def series_figure(out, path):
-    """Series a method reports about itself (e.g. a damping coefficient), mean over runs, against hours."""
-    names = [(n, k) for n, oc in out.outcomes.items() for k in oc.extra.get("series", {})]
-    fig, ax = plt.subplots(figsize=(9, 3.5))
-    for n, k in names:
-        oc = out.outcomes[n]
-        ax.plot(oc.t / 3600.0, oc.extra["series"][k].mean(axis=0), lw=1, label=f"{n}: {k}")
-    ax.set_xlabel("time (h)")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower left", fontsize=8, ncol=2)
-    ax.set_title(f"{out.metrics['scenario']}: series reported by the methods, mean over runs", fontsize=10)
-    fig.tight_layout()
+    """Series a method reports about itself (e.g. a damping coefficient), median and band over runs, a panel per
+    series; the axis label from the method's optional ``series_labels`` mapping. Returns the Figure."""
+    c = _context(out)
+    keys = list(dict.fromkeys(k for oc in out.outcomes.values() for k in oc.extra.get("series", {})))
+    c.names = [n for n in c.names if out.outcomes[n].extra.get("series")]
+    c.bad = []
+    fig, _ = fg.small_multiples(c, [(k, fg.series_label(c.methods, k), 0.0, False, []) for k in keys],
+                                lambda n, k: out.outcomes[n].extra["series"].get(k))
+    fg.finish(fig, f"{c.title}: series reported by the methods, median over runs", fg.notes(c))
     save_png(fig, path)
+    return fig
 
 
 def _window_section(out):
@@ -224,75 +197,102 @@ def _jump_section(m):
     return "\n".join(lines) + "\n"
 
 
-def _table(m):
-    lim = m["limits_arcmin"]
+def _table(m, kind):
+    """The final-error table; the stationary limit's row only where it applies, a diverged method marked."""
+    lim, bad = m["limits_arcmin"], set(m.get("diverged", []))
     rows = ["| method | phiE mean (std) | phiN mean (std) | phiU mean (std) | phiU rms | settling U (s, band "
             f"{next(iter(m['methods'].values()))['settling_time_s']['band_arcmin'] if m['methods'] else ''} arcmin) "
-            "| wall (s) |", "|---|---|---|---|---|---|---|",
-            f"| *theoretical limit* | {lim['E']:.3f} | {lim['N']:.3f} | {lim['U']:.3f} | | | |"]
+            "| wall (s) |", "|---|---|---|---|---|---|---|"]
+    if fg.decorations(kind)["limit"]:
+        rows.append(f"| *theoretical limit* | {lim['E']:.3f} | {lim['N']:.3f} | {lim['U']:.3f} | | | |")
     for name, r in m["methods"].items():
         f = r["final_error_arcmin"]
         s = r["settling_time_s"]["U"]
-        rows.append(f"| {name} | {f['E']['mean']:.3f} ({f['E']['std']:.3f}) | {f['N']['mean']:.3f} ({f['N']['std']:.3f}) "
-                    f"| {f['U']['mean']:.3f} ({f['U']['std']:.3f}) | {f['U']['rms']:.3f} | {s['mean']:.1f} "
-                    f"| {r['wall_s']:.2f} |")
+        rows.append(f"| {name}{' **(diverged)**' if name in bad else ''} | {f['E']['mean']:.3f} ({f['E']['std']:.3f}) "
+                    f"| {f['N']['mean']:.3f} ({f['N']['std']:.3f}) | {f['U']['mean']:.3f} ({f['U']['std']:.3f}) "
+                    f"| {f['U']['rms']:.3f} | {s['mean']:.1f} | {r['wall_s']:.2f} |")
+    if bad:
+        rows += ["", f"**Diverged**: {', '.join(f'`{n}`' for n in m['diverged'])}: its error over the last "
+                 f"{100 * fg.TAIL_FRACTION:g} % of the record (median over runs of the RMS) is more than "
+                 f"{fg.DIVERGENCE_FACTOR:g} times that of the better half of the methods (at least "
+                 f"{fg.DIVERGENCE_FLOOR_ARCMIN:g} arcmin) on some axis; the figures draw it apart, on its own scale."]
     return "\n".join(rows)
 
 
+def _limit_text(kind):
+    if fg.decorations(kind)["limit"]:
+        return ("The limit is what\nany stationary alignment reaches with this IMU's constant biases: level = "
+                "accelerometer bias / g,\nazimuth = -east gyro bias / (earth rate cos L) + tan L east accelerometer "
+                "bias / g.")
+    return (f"A {kind} scenario has no\nstationary limit: the errors are against the truth, and the figures draw "
+            "neither a limit nor a settling band.")
+
+
 def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y", "K1_Y", "A_YX", "KT_X")):
-    """Run 0's estimates of a few coefficients against truth with their 3-sigma envelopes (customary units);
-    for a multi-pass method its causal first pass too (the convergence a real-time filter shows)."""
+    """Run 0's estimates of a few coefficients against truth (customary units): the final pass with its 3-sigma
+    envelope shaded; for a multi-pass method its causal first pass too (the convergence a real-time filter shows)
+    as a line with its envelope dotted, unshaded; the scheme's roll phases marked. Returns the Figure."""
     from . import platform as pf
 
-    fig, axes = plt.subplots(len(names) // 2, 2, figsize=(10, 2.2 * (len(names) // 2)), sharex=True)
+    c = fg.context(out.scenario, out.metrics, dict.fromkeys(out.outcomes, out.t))
+    fig, axes = plt.subplots(len(names) // 2, 2, figsize=(10, 1.2 + 2.2 * (len(names) // 2)), sharex=True)
+    t = out.t / c.scale
     for name, oc in out.outcomes.items():
         if oc["x"] is None:
             continue
-        hists = [(f"{name}", oc["x"], oc["sig_hist"])]
-        if oc.get("x_causal") is not None:
-            hists = [(f"{name}, first (causal) pass", oc["x_causal"], oc["sig_causal"]),
-                     (f"{name}, final pass", oc["x"], oc["sig_hist"])]
-        for ax, n in zip(axes.ravel(), names):
+        for k, (ax, n) in enumerate(zip(axes.ravel(), names)):
             i = pf.COEFF_NAMES.index(n)
-            sc = pf.COEFF_SCALE[i]
-            lim = abs(oc["truth"][0, i] / sc) * 3 + 1e-12
-            for label, x, sg in hists:
-                est, sig = x[:, i] / sc, sg[:, i] / sc
-                (line,) = ax.plot(out.t, est, lw=1, label=f"{label} estimate")
-                ax.fill_between(out.t, est - 3 * sig, est + 3 * sig, color=line.get_color(), alpha=0.15)
-                lim = max(lim, abs(oc["truth"][0, i] / sc) * 3 + 3 * sig[-1])
-            ax.axhline(oc["truth"][0, i] / sc, color="k", ls="--", lw=1, label="truth")
+            sc, truth = pf.COEFF_SCALE[i], oc["truth"][0, i] / pf.COEFF_SCALE[i]
+            lim = abs(truth) * 3 + 3 * oc["sig_hist"][-1, i] / sc + 1e-12
+            if oc.get("x_causal") is not None:
+                est, sig = oc["x_causal"][:, i] / sc, oc["sig_causal"][:, i] / sc
+                ax.plot(t, est, color="tab:orange", lw=1, label=f"{name}, first (causal) pass, +-3 sigma dotted")
+                ax.plot(t, est - 3 * sig, t, est + 3 * sig, color="tab:orange", lw=0.7, ls=":")
+                lim = max(lim, abs(truth) * 3 + 3 * sig[-1])
+            est, sig = oc["x"][:, i] / sc, oc["sig_hist"][:, i] / sc
+            ax.fill_between(t, est - 3 * sig, est + 3 * sig, color="tab:blue", alpha=0.15, lw=0)
+            ax.plot(t, est, color="tab:blue", lw=1.2, label=f"{name}, final estimate, +-3 sigma shaded")
+            ax.axhline(truth, color="k", ls="--", lw=1, label="truth")
             ax.set_ylabel(f"{n} ({pf.COEFF_CUSTOMARY_UNITS[i]})", fontsize=8)
             ax.grid(alpha=0.3)
             ax.set_ylim(-lim, lim)
+            fg.mark_events(ax, c.events, c.scale, numbers=k < 2)
         break
-    axes.ravel()[0].legend(fontsize=7)
+    axes.ravel()[0].legend(fontsize=7, loc="lower right")
     for ax in axes[-1]:
-        ax.set_xlabel("time (s)")
-    fig.suptitle(f"{out.metrics['scenario']}: run 0, estimates with 3-sigma envelopes", fontsize=10)
-    fig.tight_layout()
+        ax.set_xlabel(f"time ({c.unit})")
+    fg.finish(fig, f"{c.title}: run 0, coefficient estimates against the truth", fg.notes(c))
     save_png(fig, path)
+    return fig
+
+
+def attitude_figure(out, path):
+    """Platform attitude error (E, N, U, arcsec, log), rms over runs, of every method and of a multi-pass method's
+    causal first pass (dashed), the scheme's roll phases marked. Returns the Figure."""
+    c = fg.context(out.scenario, out.metrics, dict.fromkeys(out.outcomes, out.t))
+    fig, axes = plt.subplots(3, 1, figsize=(8.5, 7.6), sharex=True)
+    for name, oc in out.outcomes.items():
+        for i, ax in enumerate(axes):
+            ax.semilogy(out.t / c.scale, oc["phi_rms"][:, i] / units.ARCSEC, lw=1, color=c.colors[name], label=name)
+            if oc.get("has_first_pass"):
+                ax.semilogy(out.t / c.scale, oc["phi_rms_causal"][:, i] / units.ARCSEC, lw=0.8, ls="--",
+                            color=c.colors[name], label=f"{name}, first (causal) pass")
+    for i, ax in enumerate(axes):
+        ax.set_ylabel(f"rms over runs of phi{'ENU'[i]} (arcsec)", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        fg.plain_log_ticks(ax)
+        fg.mark_events(ax, c.events, c.scale, numbers=i == 0)
+    axes[0].legend(fontsize=8)
+    axes[-1].set_xlabel(f"time ({c.unit})")
+    fg.finish(fig, f"{c.title}: platform attitude error, rms over runs", fg.notes(c))
+    save_png(fig, path)
+    return fig
 
 
 def _calibration_report(out, folder):
     m = out.metrics
     scn = out.scenario
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
-    for name, oc in out.outcomes.items():
-        rms = oc["phi_rms"] / units.ARCSEC
-        for i, ax in enumerate(axes):
-            line, = ax.semilogy(out.t, rms[:, i], lw=1, label=name)
-            if oc.get("has_first_pass"):
-                first = oc["phi_rms_causal"][:, i] / units.ARCSEC
-                ax.semilogy(out.t, first, lw=0.8, ls="--", color=line.get_color(), label=f"{name}, first (causal) pass")
-    for i, ax in enumerate(axes):
-        ax.set_ylabel(f"rms phi{'ENU'[i]} (arcsec)")
-        ax.grid(alpha=0.3, which="both")
-    axes[0].legend(fontsize=8)
-    axes[-1].set_xlabel("time (s)")
-    fig.suptitle(f"{m['scenario']}: platform attitude error, rms over {m['runs']} runs", fontsize=10)
-    fig.tight_layout()
-    save_png(fig, folder / "attitude.png")
+    attitude_figure(out, folder / "attitude.png")
     calibration_figure(out, folder / "coefficients.png")
     extra = {}
     for name in out.outcomes:
@@ -374,6 +374,7 @@ def write_scenario_report(out, folder):
         return _calibration_report(out, folder)
     m = out.metrics
     scn = out.scenario
+    m["diverged"] = _diverged(out)
     fig_name = "errors.png"
     error_figure(out, folder / fig_name)
     azimuth_figure(out, folder / "azimuth.png")
@@ -397,11 +398,9 @@ Runs: {m['runs']} (seed {m['seed']}{', quick size' if m['quick'] else ''}), dura
 {scn.rate_hz:g} Hz, latitude {np.degrees(scn.site.lat):.3f} deg, IMU `{scn.imu_spec.name}`
 ({scn.imu_spec.description}).
 
-Final misalignment at the last sample, arcmin (mean and standard deviation over runs). The limit is what
-any stationary alignment reaches with this IMU's constant biases: level = accelerometer bias / g,
-azimuth = -east gyro bias / (earth rate cos L) + tan L east accelerometer bias / g.
+Final misalignment at the last sample, arcmin (mean and standard deviation over runs). {_limit_text(scn.kind)}
 
-{_table(m)}
+{_table(m, scn.kind)}
 
 Methods:
 

@@ -1,0 +1,428 @@
+"""Shared helpers of the report figures: time axis, per-method colours, median and percentile bands,
+divergence, small multiples, and the events of a run (noise jumps, manoeuvres, a method's own stages).
+
+Every figure of a run draws a method as one line (the median over runs) with a light band (the 16th to
+84th percentile over runs), at most :data:`MAX_PER_PANEL` methods in a panel (more: panels side by side),
+and a method whose error is far beyond the others' (:func:`diverged`) in a panel of its own, so that it
+cannot rescale the others. Signed errors are drawn on linear axes clipped to what the well-behaved methods
+span (:func:`clip_limits`). Events are marked by number in every panel and named under the figure.
+
+Events of a method come from an optional ``events(init_given)`` method of the method object (duck-typed):
+it returns a list of ``(t_s, label)`` for an instant or ``(t0_s, t1_s, label)`` for a span, times in s from
+the start of the record, e.g. ``[(60.0, "coarse -> fine")]``. ``init_given`` tells whether the scenario
+hands the method an initial attitude (a coarse stage of its own is skipped then).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import textwrap
+import warnings
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+#: Records longer than this are drawn against hours, s.
+HOURS_FROM_S = 2 * 3600.0
+#: Most methods drawn in one panel; more are spread over panels side by side.
+MAX_PER_PANEL = 5
+#: Percentiles over runs of the light band around each method's median, %.
+BAND_PERCENTILES = (16.0, 84.0)
+#: A method diverges when its error size exceeds this factor times the well-behaved methods' (:func:`diverged`).
+DIVERGENCE_FACTOR = 20.0
+#: Smallest reference error size of :func:`diverged` in the report's figures, arcmin: a method within
+#: DIVERGENCE_FACTOR times this of the others is never called diverged.
+DIVERGENCE_FLOOR_ARCMIN = 1.0
+#: The shared y range of signed errors ends at this factor times the well-behaved methods' error size
+#: (:func:`reference_size`): a slow transient of one of them leaves the panel instead of flattening the others.
+CLIP_FACTOR = 10.0
+#: Share of the record at its end over which a method's error size is measured.
+TAIL_FRACTION = 0.1
+#: What the figures draw per scenario kind (:data:`fusionbench.scenarios.KINDS`): the stationary theoretical
+#: limit and the settling band around it apply only to an alignment on a stationary or swaying base.
+DECORATIONS = {"alignment": {"limit": True, "band": True},
+               "moving-alignment": {"limit": False, "band": False},
+               "navigation": {"limit": False, "band": False},
+               "calibration": {"limit": False, "band": False},
+               "conformance": {"limit": True, "band": True}}
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def save_png(fig, path):
+    """Save a matplotlib figure as PNG atomically and close it (mode 0666 less the umask, like any new file)."""
+    fd, tmp = tempfile.mkstemp(suffix=".png", dir=os.path.dirname(path) or ".")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600: unreadable to a colleague or a web server
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def decorations(kind):
+    """``{"limit": bool, "band": bool}``: whether a scenario of ``kind`` gets the limit and the settling band."""
+    return DECORATIONS.get(kind, {"limit": False, "band": False})
+
+
+def time_axis(t_end_s):
+    """Unit of a time axis for a record ending at ``t_end_s`` (s): ``(divisor_s, "s" or "h")``, hours beyond
+    :data:`HOURS_FROM_S`."""
+    return (3600.0, "h") if t_end_s > HOURS_FROM_S else (1.0, "s")
+
+
+def colors(names):
+    """A fixed colour per method name, in order (tab10, then tab20 beyond ten methods)."""
+    cmap = plt.get_cmap("tab10" if len(names) <= 10 else "tab20")
+    return {n: cmap(i % cmap.N) for i, n in enumerate(names)}
+
+
+def plain_log_ticks(ax):
+    """Label a log y axis with plain numbers (1, 10, 100; and 2, 5, 20, 50 over two decades or less) instead of
+    powers of ten."""
+    from matplotlib.ticker import FuncFormatter
+
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+
+    def minor(v, _):  # 2 and 5 of each decade, when the axis spans at most two decades
+        lo, hi = ax.get_ylim()
+        few = lo > 0 and hi / lo <= 150.0
+        return f"{v:g}" if few and round(v / 10 ** np.floor(np.log10(v) + 1e-9)) in (2, 5) else ""
+
+    ax.yaxis.set_minor_formatter(FuncFormatter(minor))
+
+
+def spread(values):
+    """``(low, high)`` (M,) of ``values`` (R, M) over runs: the :data:`BAND_PERCENTILES` percentiles (one run: the
+    run itself)."""
+    values = np.asarray(values, dtype=float)
+    if values.shape[0] < 2 or values.shape[1] == 0:
+        return values[0], values[0]
+    with warnings.catch_warnings():  # a time where every run is NaN (not drawn) stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, hi = np.nanpercentile(values, BAND_PERCENTILES, axis=0)
+    return lo, hi
+
+
+def median_band(ax, t, values, color, label, band=True, **kw):
+    """Draw the median over runs of ``values`` (R, M) against ``t`` (M,) and, with two runs or more, the
+    :func:`spread` band in a light shade of the same colour. Returns the line."""
+    values = np.asarray(values, dtype=float)
+    with warnings.catch_warnings():  # a time where every run is NaN (not drawn) stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mid = np.nanmedian(values, axis=0)
+    (line,) = ax.plot(t, mid, color=color, label=label, lw=kw.pop("lw", 1.2), **kw)
+    if band and values.shape[0] > 1:
+        ax.fill_between(t, *spread(values), color=color, alpha=0.1, lw=0)
+    return line
+
+
+def error_size(t, values):
+    """A method's error size on one axis: the median over runs of the RMS over the last :data:`TAIL_FRACTION`
+    of the record of ``values`` (R, M), in the unit of ``values``; ``t`` (M,) s."""
+    t = np.asarray(t, dtype=float)
+    tail = t >= t[0] + (1.0 - TAIL_FRACTION) * (t[-1] - t[0])
+    return float(np.median(np.sqrt(np.mean(np.asarray(values, dtype=float)[:, tail] ** 2, axis=1))))
+
+
+def reference_size(sizes, floor):
+    """The size of the well-behaved methods: the median of the smaller half of ``sizes`` (n_methods, ...) along
+    the first axis (whatever the worse half does), but at least ``floor``."""
+    S = np.asarray(sizes, dtype=float)
+    S = np.where(np.isfinite(S), S, np.inf)
+    return np.maximum(np.median(np.sort(S, axis=0)[: -(-len(S) // 2)], axis=0), floor)
+
+
+def diverged(sizes, floor):
+    """Names of the methods that diverge.
+
+    Rule: on each axis the reference is :func:`reference_size` of all methods' sizes (the median of the smaller
+    half, at least ``floor``); a method diverges when on any axis its size exceeds :data:`DIVERGENCE_FACTOR`
+    times the reference, or is not finite. With fewer than two methods nothing diverges (there is nothing to
+    compare with).
+
+    Parameters
+    ----------
+    sizes : dict of str to array_like, shape (n_axes,)
+        Each method's :func:`error_size` per axis, e.g. arcmin.
+    floor : float
+        Smallest reference size, same unit (e.g. :data:`DIVERGENCE_FLOOR_ARCMIN`).
+
+    Returns
+    -------
+    list of str
+        In the order of ``sizes``.
+    """
+    if len(sizes) < 2:
+        return []
+    S = np.array([np.asarray(v, dtype=float) for v in sizes.values()])
+    S = np.where(np.isfinite(S), S, np.inf)
+    ref = reference_size(S, floor)
+    return [n for n, s in zip(sizes, S) if np.any(s > DIVERGENCE_FACTOR * ref)]
+
+
+def diverged_histories(histories, floor=DIVERGENCE_FLOOR_ARCMIN):
+    """:func:`diverged` of error histories: name to ``(t (M,) s, err (R, M, n_axes))``, sizes per axis by
+    :func:`error_size` (``floor`` in the unit of ``err``, arcmin by default)."""
+    return diverged({n: [error_size(t, e[..., i]) for i in range(e.shape[-1])] for n, (t, e) in histories.items()},
+                    floor)
+
+
+def series_label(methods, key):
+    """The axis label of a reported series ``key``: from the first method object (of ``methods``, name to object)
+    whose optional ``series_labels`` mapping names it; else the key itself."""
+    return next((m.series_labels[key] for m in methods.values() if key in getattr(m, "series_labels", {})),
+                f"{key} (as reported)")
+
+
+def clip_limits(curves, pad=0.08, log=False, cap=np.inf, keep=()):
+    """Limits ``(lo, hi)`` of an axis spanning the finite values of ``curves`` (arrays) within +-``cap`` and the
+    values ``keep`` (always in view), padded by ``pad`` of the span on each side (``log``: of the decades,
+    positive values only); None when there are none."""
+    vals = np.concatenate([np.ravel(np.asarray(c, dtype=float)) for c in curves]) if curves else np.empty(0)
+    vals = vals[np.isfinite(vals) & (np.abs(vals) <= cap)]
+    vals = np.concatenate([vals] + [np.ravel(np.asarray(k, dtype=float)) for k in keep])
+    vals = vals[np.isfinite(vals) & ((vals > 0) if log else True)]
+    if not vals.size:
+        return None
+    if log:
+        lo, hi = np.log10(vals.min()), np.log10(vals.max())
+        span = max(hi - lo, 1.0)
+        return 10 ** (lo - pad * span), 10 ** (hi + pad * span)
+    lo, hi = float(vals.min()), float(vals.max())
+    span = hi - lo or max(abs(hi), 1.0)
+    return lo - pad * span, hi + pad * span
+
+
+def groups(names, size=MAX_PER_PANEL):
+    """``names`` in consecutive groups of at most ``size``, as even as possible."""
+    names = list(names)
+    k = max(1, -(-len(names) // size))
+    return [list(g) for g in np.array_split(np.array(names, dtype=object), k) if len(g)]
+
+
+def panels(nrows, names, bad=(), row_height=2.4, col_width=4.6, sharex=True):
+    """A small-multiples grid: ``nrows`` rows, a column per group of well-behaved methods and a narrower last
+    column for the ``bad`` (diverged) ones. Returns ``(fig, axes (nrows, ncols), cols)`` where ``cols`` lists
+    each column's method names (the last one the diverged methods when there are any)."""
+    good = [n for n in names if n not in bad]
+    cols = groups(good) if good else []
+    widths = [1.0] * len(cols)
+    if bad:
+        cols.append([n for n in names if n in bad])
+        widths.append(0.7)
+    fig, axes = plt.subplots(nrows, len(cols), figsize=(max(8.5, 1.0 + col_width * sum(widths)), 1.2 + row_height * nrows),
+                             squeeze=False, sharex=sharex, gridspec_kw={"width_ratios": widths})
+    if bad:
+        for ax in axes[:, -1]:
+            ax.set_facecolor("#fff4f2")
+        axes[0, -1].set_title("diverged: own scale", fontsize=9, color="crimson")
+    return fig, axes, cols
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something that happens during a record: an instant (``t1_s`` None) or a span, s from the start.
+    ``methods`` names the methods it belongs to (empty: the scenario's); ``shade`` False draws a span's
+    bounds only (phases that tile the record)."""
+
+    t0_s: float
+    t1_s: float | None
+    label: str
+    methods: tuple = ()
+    shade: bool = True
+
+
+def scenario_events(scn, duration_s):
+    """Events of a scenario: noise schedules of the IMU and of the velocity reference, the jump window of
+    the metrics, the motion segments (a manoeuvre) and the segments of a platform's rolling scheme."""
+    ev = []
+    for s in getattr(scn.imu_spec, "schedules", ()):
+        who = "IMU" if set(s.sensors) == {"gyro", "accel"} else "+".join(s.sensors)
+        ev.append(Event(s.start, s.end, f"{who} white-noise PSD x{s.factor:g}"))
+    for s in getattr(scn.vref_spec, "schedules", ()):
+        ev.append(Event(s.start, s.end, f"reference-velocity noise variance x{s.factor:g}"))
+    jump = getattr(scn, "jump_window_s", None)
+    if jump is not None and not any(e.t0_s == jump[0] and e.t1_s == jump[1] for e in ev):
+        ev.append(Event(jump[0], jump[1], "noise-jump window"))
+    tr = getattr(scn, "translation", None)
+    if tr is not None and tr.segments:
+        t = tr.start
+        for seg in tr.segments:
+            if seg.duration > 0 and not (t <= 0 and t + seg.duration >= duration_s):  # not the whole record
+                a = np.asarray(seg.accel, dtype=float)
+                ev.append(Event(t, t + seg.duration, f"manoeuvre, {np.linalg.norm(a):.3g} m/s^2"))
+            t += seg.duration
+    if getattr(scn, "platform", None) is not None:
+        ev += scheme_events(scn.platform.scaled(duration_s).scheme)
+    return ev
+
+
+def scheme_events(scheme):
+    """The roll phases of a platform's rolling scheme (:class:`fusionbench.platform.Scheme`) as unshaded spans."""
+    from .calibration import _AXES
+
+    names = {v: k for k, v in _AXES.items()}
+    ev, t = [], 0.0
+    for seg in scheme.segments:
+        ev.append(Event(t, t + seg.duration, f"roll about {names.get(tuple(seg.axis), str(tuple(seg.axis)))}",
+                        shade=False))
+        t += seg.duration
+    return ev
+
+
+def method_events(methods, init_given):
+    """Events that methods report about themselves through ``events(init_given)`` (module notes); the same
+    event of several methods is one :class:`Event` naming them all. ``methods`` maps names to method objects."""
+    seen = {}
+    for name, obj in methods.items():
+        if not hasattr(obj, "events"):
+            continue
+        for item in obj.events(init_given):
+            t0, t1, label = (item[0], None, item[1]) if len(item) == 2 else item
+            seen.setdefault((float(t0), None if t1 is None else float(t1), label), []).append(name)
+    return [Event(t0, t1, label, tuple(ns)) for (t0, t1, label), ns in seen.items()]
+
+
+def in_record(events, duration_s):
+    """The events that start inside the record (0, duration_s], sorted by time."""
+    return sorted((e for e in events if 0 < e.t0_s <= duration_s or (e.t1_s is not None and e.t0_s <= 0 < e.t1_s)),
+                  key=lambda e: e.t0_s)
+
+
+def mark_events(ax, events, scale=1.0, names=None, numbers=True):
+    """Mark ``events`` on ``ax`` (x in s / ``scale``): spans lightly shaded, instants as dotted lines, each with
+    its number (1-based, the order of ``events``) at the top when ``numbers``. A method's event is drawn only
+    in a panel showing that method (``names``; None: every panel)."""
+    for i, e in enumerate(events, 1):
+        if names is not None and e.methods and not set(e.methods) & set(names):
+            continue
+        x0 = e.t0_s / scale
+        if e.t1_s is None:
+            ax.axvline(x0, color="0.3", ls=":", lw=1.0)
+        elif e.shade:
+            ax.axvspan(x0, e.t1_s / scale, color="gold", alpha=0.15, lw=0)
+        else:
+            ax.axvline(x0, color="0.6", ls="-", lw=0.6)
+        if numbers:
+            xm = x0 if e.t1_s is None else 0.5 * (x0 + e.t1_s / scale)
+            ax.annotate(str(i), (xm, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 1),
+                        textcoords="offset points", ha="center", va="bottom", fontsize=7, color="0.2",
+                        bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "0.5", "lw": 0.5})
+
+
+def events_note(events, scale=1.0, unit="s"):
+    """The legend of the event numbers, one paragraph ("" when there are none)."""
+    def t(x):
+        return f"{x / scale:.4g} {unit}"
+
+    parts = []
+    for i, e in enumerate(events, 1):
+        when = f"at {t(e.t0_s)}" if e.t1_s is None else f"{t(e.t0_s)} to {t(e.t1_s)}"
+        who = f" ({', '.join(e.methods)})" if e.methods else ""
+        parts.append(f"[{i}] {e.label}{who}, {when}")
+    return "Events: " + "; ".join(parts) + "." if parts else ""
+
+
+def context(scn, metrics, times, bad=()):
+    """What every figure of a run shares: method names (those of ``times``, name to (M,) s) and colours, the
+    diverged methods ``bad`` (drawn apart), the events of the scenario and of the methods, the time unit, what the
+    scenario's kind draws (:func:`decorations`) and a title. Methods are instantiated through ``scn.method``."""
+    duration = metrics["duration_s"]
+    names = list(times)
+    methods = {}
+    for n in names:
+        try:
+            methods[n] = scn.method(n)
+        except ValueError:
+            continue
+    init_given = getattr(scn, "init_misalignment", None) is not None
+    events = scenario_events(scn, duration) + method_events(methods, init_given)
+    scale, unit = time_axis(duration)
+    return SimpleNamespace(names=names, t=dict(times), colors=colors(names), bad=list(bad), methods=methods,
+                           events=in_record(events, duration), scale=scale, unit=unit, deco=decorations(scn.kind),
+                           title=f"{metrics['scenario']} ({scn.kind}, {metrics['runs']} runs)")
+
+
+def small_multiples(c, rows, values, sharex=True):
+    """Small multiples: a row per ``rows`` item ``(key, ylabel, t_from_s, log, refs)`` x a column per method group;
+    ``values(name, key)`` gives (R, M) arrays (None: not drawn) drawn as median and band. The well-behaved columns
+    share each row's y range, what they span from ``t_from_s`` on and the ``refs`` ((y or (y0, y1), style,
+    label) lines and bands); diverged methods in the last column on their own scale. ``c`` is a :func:`context`.
+    Returns (fig, axes)."""
+    fig, axes, cols = panels(len(rows), c.names, c.bad, sharex=sharex)
+    for i, (key, ylabel, t_from, log, refs) in enumerate(rows):
+        keep = [np.ravel(y) for y, _, _ in refs] + ([] if log else [np.zeros(1)])  # the truth in view
+        span, sizes, own = [], [], []
+        for j, col in enumerate(cols):
+            ax = axes[i, j]
+            for k, n in enumerate(col):
+                v = values(n, key)
+                if v is None:
+                    continue  # later lines thinner: one that coincides with an earlier one leaves its edges in view
+                median_band(ax, c.t[n] / c.scale, v, c.colors[n], n, lw=max(0.8, 2.0 - 0.3 * k))
+                (own if n in c.bad else span).extend(spread(v[:, c.t[n] >= t_from]))
+                if n not in c.bad:
+                    sizes.append(error_size(c.t[n], v))
+            ax.set_yscale("log" if log else "linear")
+            if log:
+                plain_log_ticks(ax)
+            else:
+                ax.axhline(0.0, color="0.6", lw=0.6)
+            for y, style, label in refs:
+                if style == "band":
+                    ax.axhspan(y[0], y[1], color="k", alpha=0.07, lw=0, label=label)
+                else:
+                    ax.axhline(y, color="k", ls=style, lw=1, label=label)
+            mark_events(ax, c.events, c.scale, col, numbers=i == 0)
+            ax.grid(alpha=0.3, which="both" if log else "major")
+            ax.set_ylabel(ylabel if j == 0 or (c.bad and j == len(cols) - 1) else "", fontsize=9)
+        cap = np.inf if log or not sizes else \
+            CLIP_FACTOR * reference_size(sizes, DIVERGENCE_FLOOR_ARCMIN) + np.max(np.abs(np.concatenate(keep)))
+        lim = clip_limits(span, log=log, cap=cap, keep=keep)
+        for j, col in enumerate(cols):
+            if lim is not None and not set(col) & set(c.bad):
+                axes[i, j].set_ylim(lim)
+        if c.bad and own:  # the diverged ones: their own range, from t_from on too
+            axes[i, -1].set_ylim(clip_limits(own, log=log, keep=keep))
+    for j in range(axes.shape[1]):
+        axes[0, j].legend(fontsize=7, loc="best")
+        axes[-1, j].set_xlabel(f"time ({c.unit})")
+    top = set(axes[0, 0].get_legend_handles_labels()[1])
+    for i in range(1, len(rows)):  # lines of reference below the first row: their own legend
+        hl = [(h, lab) for h, lab in zip(*axes[i, 0].get_legend_handles_labels()) if lab not in c.names]
+        if hl and {lab for _, lab in hl} - top:
+            axes[i, 0].legend(*zip(*hl), fontsize=7, loc="best")
+    return fig, axes
+
+
+def notes(c, extra=""):
+    """The paragraphs under a run's figure: its events, ``extra``, and which methods are drawn apart."""
+    bad = (f"Diverged (error at the end over {DIVERGENCE_FACTOR:g} times the better half's): "
+           f"{', '.join(c.bad)}, drawn apart on its own scale." if c.bad else "")
+    return [events_note(c.events, c.scale, c.unit), extra, bad]
+
+
+def finish(fig, title, notes=(), fontsize=10):
+    """Title the figure and put the paragraphs ``notes`` (e.g. :func:`events_note`) under it, both wrapped to the
+    figure's width, and lay it out."""
+    width = fig.get_figwidth()
+    fig.suptitle(textwrap.fill(title, int(width * 13)), fontsize=fontsize)
+    note = "\n".join(textwrap.fill(n, int(width * 19)) for n in notes if n)
+    if note:
+        fig.text(0.01, 0.01, note, fontsize=7, va="bottom", ha="left", color="0.2")
+    bottom = (0.1 + 0.13 * (note.count("\n") + 1)) / fig.get_figheight() if note else 0.0
+    fig.tight_layout(rect=(0, bottom, 1, 1))
