@@ -138,6 +138,14 @@ def headline(kind, metrics, has_init=False):
     return col
 
 
+def _flag_diverged(col, metrics):
+    """A method the report found diverging (metrics.json ``diverged``) reads so in its cell and is ranked last."""
+    for meth in metrics.get("diverged", []):
+        if meth in col.values:
+            col.values[meth] = (float("inf"), f"{col.values[meth][1]} (diverged)")
+    return col
+
+
 def grade(col, method):
     """``good``, ``fair``, ``poor`` or ``none``: a cell against its column's best (GOOD_FACTOR, POOR_FACTOR);
     a conformance cell is good when every claimed cell passed, poor otherwise; a calibration cell good within
@@ -149,7 +157,9 @@ def grade(col, method):
         return "good" if value <= 1.0 else "poor"
     if col.kind == "calibration":
         return "good" if value <= 1.0 else "fair" if value <= POOR_FACTOR else "poor"
-    ranked = [v for v, _ in col.values.values() if v is not None]
+    if value == float("inf"):
+        return "poor"
+    ranked = [v for v, _ in col.values.values() if v is not None and v != float("inf")] or [value]
     best = max(ranked) if col.higher_is_better else min(ranked)
     ratio = (best / value if value else float("inf")) if col.higher_is_better else (value / best if best else
                                                                                     (1.0 if value == 0 else 10.0))
@@ -260,8 +270,8 @@ def write_overview(folder, results, wall_total=None):
     folder = Path(folder)
     columns, entries = [], []
     for scn, metrics, report_md in results:
-        columns.append(headline(getattr(scn, "kind", "alignment"), metrics,
-                                getattr(scn, "init_misalignment", None) is not None))
+        columns.append(_flag_diverged(headline(getattr(scn, "kind", "alignment"), metrics,
+                                               getattr(scn, "init_misalignment", None) is not None), metrics))
         entries.append((metrics["scenario"], {"description": getattr(scn, "description", ""), **metrics}, report_md))
         page = Path(report_md).with_suffix(".html")
         if not page.exists():

@@ -155,3 +155,17 @@ def _check_provenance(p, runs):
     assert p["command"].split()[1:4] == ["run", "static-34n", "--quick"]
     assert p["runs"] == runs and p["seed"] == 0 and p["quick"] is True and p["duration_s"] == 120.0
     assert 0.0 < p["wall_s"] < 300.0
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_installed_references_cover_every_builtin_scenario_at_its_size(quick):
+    # a reference made at another size than the scenario's own would make `check` refuse every user's run
+    from fusionbench import scenarios
+    from fusionbench.check import packaged_reference
+
+    folder = packaged_reference(quick)
+    for name in scenarios.builtin_names():
+        ref = json.loads((folder / f"{name}.json").read_text())
+        duration, runs = scenarios.get(name).sized(quick)
+        assert (ref["scenario"], ref["quick"], ref["runs"], ref["seed"]) == (name, quick, runs, 0), name
+        assert ref["duration_s"] == pytest.approx(duration), name

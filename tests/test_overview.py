@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from fusionbench import provenance, scenarios
-from fusionbench.overview import GOOD_FACTOR, grade, headline, write_overview, write_page
+from fusionbench.overview import GOOD_FACTOR, _flag_diverged, grade, headline, write_overview, write_page
 from fusionbench.report import write_scenario_report
 from fusionbench.runner import run_scenario
 
@@ -93,6 +93,10 @@ def test_headline_of_an_alignment_is_the_azimuth_rms_about_the_limit():
     col = headline("alignment", m)
     assert col.values["x"][0] == pytest.approx(np.sqrt(np.mean((phi_u + 3.67) ** 2)))
     assert "limit -3.67" in col.note
+    m["methods"]["y"] = {"final_error_arcmin": {"U": {"mean": 4000.0, "std": 10.0}}}
+    m["diverged"] = ["y"]
+    col = _flag_diverged(headline("alignment", m), m)
+    assert col.values["y"][1].endswith("(diverged)") and grade(col, "y") == "poor" and grade(col, "x") == "good"
 
 
 def test_headlines_of_navigation_and_calibration_and_conformance():
