@@ -81,63 +81,76 @@ def _window_figures(scn, t, phi):
     return out
 
 
-def _run_batch(scn, method_names, first_run, runs, seed, duration, refusals=False):
-    """Simulate runs first_run..first_run+runs-1 and align them with every method.
-
-    With ``refusals`` a method that refuses the data (ValueError) gets its message instead of an outcome."""
+def _simulate_batch(scn, first_run, runs, seed, duration):
+    """Runs first_run..first_run+runs-1: (trajectory, IMU data, velocity reference or None, initial guess or None)."""
     traj = scn.trajectory(duration)
     data = imu_mod.simulate(traj, scn.imu_spec, scn.dt, runs=runs, seed=seed, first_run=first_run)
     t_inc, _, _ = data.increments()
     vref = None  # a fixed base without a reference's noise: the zero-velocity assumption, as a user's align makes it
     if not traj.translation.is_static() or any(scn.vref_spec.sigma):
         vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
-    init = scn.initial_guess(traj.truth([data.t0]).C_bn[0])
-    out = {}
+    return traj, data, vref, scn.initial_guess(traj.truth([data.t0]).C_bn[0])
+
+
+def _run_units(scn, method_names, first_run, runs, seed, duration, refusals=False):
+    """Simulate runs first_run..first_run+runs-1 once and yield ``(name, outcome)`` as each method finishes.
+
+    With ``refusals`` a method that refuses the data (ValueError) gets its message instead of an outcome."""
+    sim = _simulate_batch(scn, first_run, runs, seed, duration)
     for name in method_names:
-        method = scn.method(name)
-        desc = method.description
-        if name in scn.variants:
-            opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
-            desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
-        t0 = time.perf_counter()
-        try:
-            res = method.align(data, scn.site, vref=vref, init=init)
-        except ValueError as exc:
-            if not refusals:
-                raise
-            out[name] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            continue
-        wall = time.perf_counter() - t0
-        check_time_rule(res, data, name)
-        truth_C = traj.truth(res.t).C_bn
-        phi = metrics.misalignment_history(res.C_bn, truth_C)
-        limit_u = _limits(scn, traj, res.t, truth_C)[:, 2]  # (M,) rad: it moves with the attitude on a sway
-        band = scn.settling_band_arcmin * units.ARCMIN
-        if is_causal(method):
-            settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
-            done = metrics.settled(phi[..., 2], band, limit_u)
-        else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
-            settle, done = _prefix_settling(method, data, vref, init, traj, scn, phi[:, -1, 2], limit_u[-1],
-                                            first_run)
-        idx = _decimate(res.t)
-        t_h, phi_h = res.t[idx], phi[:, idx]
-        last = res.t >= res.t[-1] - LEVEL_WINDOW_S
-        level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-        extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1],
-                 "settle": settle, "settled": done}
-        if scn.jump_window_s is not None:
-            a, b = scn.jump_window_s
-            parts = {"before": res.t < a, "during": (res.t >= a) & (res.t < b), "after": res.t >= b}
-            extra["window_ms"] = {k: np.mean(phi[:, sel] ** 2, axis=1) for k, sel in parts.items() if sel.any()}
-            extra["peak"] = np.max(np.abs(phi[:, res.t >= a]), axis=1)
-            after = res.t >= b
-            extra["reconverge"] = metrics.settling_time(res.t[after], phi[:, after, 2], band, limit_u[after]) - b
-        extra.update(_window_figures(scn, res.t, phi))
-        # what a method reports about itself: scalar figures and (R, M) series kept like the history
-        extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.extra.get("series", {}).items()}
-        figures = {k: float(v) for k, v in res.extra.get("figures", {}).items()}
-        out[name] = (desc, t_h, phi_h, phi[:, -1], wall, extra, figures)
-    return out
+        yield name, _align_batch(scn, name, sim, first_run, refusals)
+
+
+def _run_unit(scn, name, first_run, runs, seed, duration, refusals=False):
+    """One method on runs first_run..first_run+runs-1, simulated here (a worker's unit): ``(name, outcome)``."""
+    return next(_run_units(scn, [name], first_run, runs, seed, duration, refusals))
+
+
+def _align_batch(scn, name, sim, first_run, refusals):
+    """One method on one simulated batch: its outcome tuple, or its refusal message."""
+    traj, data, vref, init = sim
+    method = scn.method(name)
+    desc = method.description
+    if name in scn.variants:
+        opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
+        desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
+    t0 = time.perf_counter()
+    try:
+        res = method.align(data, scn.site, vref=vref, init=init)
+    except ValueError as exc:
+        if not refusals:
+            raise
+        return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    wall = time.perf_counter() - t0
+    check_time_rule(res, data, name)
+    truth_C = traj.truth(res.t).C_bn
+    phi = metrics.misalignment_history(res.C_bn, truth_C)
+    limit_u = _limits(scn, traj, res.t, truth_C)[:, 2]  # (M,) rad: it moves with the attitude on a sway
+    band = scn.settling_band_arcmin * units.ARCMIN
+    if is_causal(method):
+        settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
+        done = metrics.settled(phi[..., 2], band, limit_u)
+    else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
+        settle, done = _prefix_settling(method, data, vref, init, traj, scn, phi[:, -1, 2], limit_u[-1],
+                                        first_run)
+    idx = _decimate(res.t)
+    t_h, phi_h = res.t[idx], phi[:, idx]
+    last = res.t >= res.t[-1] - LEVEL_WINDOW_S
+    level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
+    extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1],
+             "settle": settle, "settled": done}
+    if scn.jump_window_s is not None:
+        a, b = scn.jump_window_s
+        parts = {"before": res.t < a, "during": (res.t >= a) & (res.t < b), "after": res.t >= b}
+        extra["window_ms"] = {k: np.mean(phi[:, sel] ** 2, axis=1) for k, sel in parts.items() if sel.any()}
+        extra["peak"] = np.max(np.abs(phi[:, res.t >= a]), axis=1)
+        after = res.t >= b
+        extra["reconverge"] = metrics.settling_time(res.t[after], phi[:, after, 2], band, limit_u[after]) - b
+    extra.update(_window_figures(scn, res.t, phi))
+    # what a method reports about itself: scalar figures and (R, M) series kept like the history
+    extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.extra.get("series", {}).items()}
+    figures = {k: float(v) for k, v in res.extra.get("figures", {}).items()}
+    return desc, t_h, phi_h, phi[:, -1], wall, extra, figures
 
 
 #: Spacing of the record prefixes on which a smoother's settling is measured, s.
@@ -262,17 +275,26 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
             batch_size = max(1, min(batch_size, -(-runs // workers)))
     starts = list(range(0, runs, batch_size))
     jobs = [(k0, min(batch_size, runs - k0)) for k0 in starts]
+    # the unit of work is one method on one batch, so that the bar moves as methods finish, not only as batches do
+    units = [(k0, n, name) for k0, n in jobs for name in methods]
     pbar = progress_bar(progress, runs, scn.name)
-    if n_jobs == 1 or len(jobs) == 1:  # one batch: no worker to start
-        done = (_run_batch(scn, methods, k0, n, seed, duration, refusals) for k0, n in jobs)
-    else:  # batches in order, each as soon as it (and those before it) are done
+    if n_jobs == 1 or len(units) == 1:  # in this process: each batch simulated once for all its methods
+        done = ((name, r) for k0, n in jobs for name, r in _run_units(scn, methods, k0, n, seed, duration, refusals))
+    else:  # a worker simulates its batch again for each method (a fraction of a second; the methods take seconds)
         done = Parallel(n_jobs=n_jobs, return_as="generator")(
-            delayed(_run_batch)(scn, methods, k0, n, seed, duration, refusals) for k0, n in jobs)
-    results = []
-    for (_, n), r in zip(jobs, done):
-        results.append(r)
-        pbar.update(n)
+            delayed(_run_unit)(scn, name, k0, n, seed, duration, refusals) for k0, n, name in units)
+    results = {k0: {} for k0, _ in jobs}
+    shown, acc = 0, 0.0
+    for (k0, n, name), (got, r) in zip(units, done):
+        results[k0][got] = r
+        acc += n / len(methods)  # runs finished, counted in fractions of a batch
+        if int(acc + 1e-9) > shown:
+            pbar.update(int(acc + 1e-9) - shown)
+            shown = int(acc + 1e-9)
+    if runs > shown:
+        pbar.update(runs - shown)
     pbar.close()
+    results = [results[k0] for k0, _ in jobs]
 
     traj = scn.trajectory(duration)
     limits = _limits(scn, traj, [duration], traj.truth([duration]).C_bn)[0]

@@ -296,14 +296,17 @@ class _Counter:
 
 @pytest.mark.parametrize("n_jobs", [1, 2])
 def test_a_shared_bar_advances_by_finished_runs(n_jobs):
-    """``run all`` shares one bar: each scenario advances it by exactly its runs, batch by batch as batches finish
-    (also under workers), and leaves it open for the next scenario."""
+    """``run all`` shares one bar: each scenario advances it by exactly its runs, as each method finishes a batch
+    (also under workers: a worker's unit is one method on one batch), and leaves it open for the next scenario."""
     from fusionbench import progress
 
     scn = scenarios.get("static-34n")
     bar = _Counter()
     run_scenario(scn, methods=["coarse"], runs=5, quick=True, n_jobs=n_jobs, batch_size=2, progress=bar)
     assert bar.steps == [2, 2, 1]
+    bar = _Counter()  # two methods: half a batch's runs per finished method, whole runs shown
+    run_scenario(scn, methods=["coarse", "coarse-i0"], runs=5, quick=True, n_jobs=n_jobs, batch_size=2, progress=bar)
+    assert bar.steps == [1, 1, 1, 1, 1]
     assert progress.expected_runs(scn, 5, True) == 5
     conf = scenarios.get("conformance")
     assert progress.expected_runs(conf, None, True) == 3 * len(conf.conditions)
