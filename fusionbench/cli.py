@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from . import __version__, attitude, progress, provenance, scenarios
 from .aligner import (MAX_BIAS_TO_EARTH_RATE, Site, available_methods, check_time_rule, load_method, supports,
@@ -128,7 +127,7 @@ def _cmd_run(args):
     total = sum(progress.expected_runs(scn, args.runs, args.quick) for scn in scns)
     print(f"fusionbench run {args.scenario}: {len(scns)} scenario{'s' * (len(scns) > 1)}, {total} Monte Carlo runs"
           f"{' (--quick size)' if args.quick else ''} into {out_dir}", flush=True)
-    pbar = tqdm(total=total, unit="run", desc="fusionbench run", disable=not sys.stderr.isatty(), dynamic_ncols=True)
+    pbar = progress.terminal_bar(total, "fusionbench run", disable=not sys.stderr.isatty())
     start = time.perf_counter()
     for scn in scns:
         t0 = time.perf_counter()

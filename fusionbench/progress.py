@@ -6,6 +6,7 @@ The runners take ``progress``: None (a bar of their own on a terminal, nothing o
 
 from __future__ import annotations
 
+import os
 import sys
 
 from tqdm import tqdm
@@ -29,7 +30,18 @@ def bar(progress, total, desc):
     if progress is not None and hasattr(progress, "update"):
         return _Shared(progress)
     show = sys.stderr.isatty() if progress is None else bool(progress)
-    return tqdm(total=total, desc=desc, unit="run", disable=not show)
+    return terminal_bar(total, desc, disable=not show)
+
+
+def terminal_bar(total, desc, disable):
+    """A tqdm bar over runs on stderr: as wide as the terminal, or 100 x 20 where the terminal reports no size
+    (a pseudo-terminal of ``script`` or a CI runner says 0 x 0, and tqdm then hides its bar as below the screen)."""
+    try:
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError, AttributeError):  # not a terminal, or no file number
+        size = os.terminal_size((0, 0))
+    shape = {"dynamic_ncols": True} if size.columns > 0 and size.lines > 0 else {"ncols": 100, "nrows": 20}
+    return tqdm(total=total, desc=desc, unit="run", disable=disable, **shape)
 
 
 def expected_runs(scn, runs=None, quick=False):
