@@ -26,8 +26,8 @@ body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:2em auto;m
 color:#222;line-height:1.4}
 table{border-collapse:collapse;margin:1em 0;font-size:0.9em}
 th,td{border:1px solid #ccc;padding:0.3em 0.5em;text-align:right;vertical-align:top}
-th{background:#f3f3f3}
-td:first-child,th:first-child{text-align:left}
+th{background:#f3f3f3;font-size:0.85em}
+td:first-child,th:first-child{text-align:left;white-space:nowrap}
 .good{background:#d9f0d3}.fair{background:#fdf1c7}.poor{background:#f6d0cc}.none{color:#999}
 .scroll{overflow-x:auto}
 img{max-width:100%}
@@ -50,6 +50,7 @@ class Column:
     note: str = ""
     higher_is_better: bool = False
     values: dict = field(default_factory=dict)
+    short: str = ""
 
 
 def _rms_about(stat, centre):
@@ -81,7 +82,7 @@ def headline(kind, metrics, has_init=False):
     """
     name, methods = metrics["scenario"], metrics["methods"]
     if kind == "conformance":
-        col = Column(name, kind, "cells passed of claimed; worst azimuth efficiency (1 optimal)")
+        col = Column(name, kind, "cells passed of claimed; worst azimuth efficiency (1 optimal)", short="passed; worst eff.")
         for meth, cells in metrics.get("cells", {}).items():
             claimed = [c for c in cells.values() if c.get("status") not in ("not claimed", None)]
             passed = sum(c["status"] == "pass" for c in claimed)
@@ -92,7 +93,8 @@ def headline(kind, metrics, has_init=False):
             col.values[meth] = (fail + max(effs, default=0.0), text) if claimed else (None, "claims none")
         return col
     if kind == "calibration":
-        col = Column(name, kind, "coefficient groups within the paper's claim; worst |mean error| / claim")
+        col = Column(name, kind, "coefficient groups within the paper's claim; worst |mean error| / claim",
+                     short="within claim; worst / claim")
         for meth, r in methods.items():
             ratios = {g: v["max_abs_error_mean"] / v["paper_below"] for g, v in r.get("groups", {}).items()
                       if v.get("paper_below")}
@@ -105,33 +107,34 @@ def headline(kind, metrics, has_init=False):
         return col
     if kind == "navigation":
         note = f"reduction {metrics['reduction_percent']:.1f} %" if "reduction_percent" in metrics else ""
-        col = Column(name, kind, "level RMSE in the window (arcmin)", note)
+        col = Column(name, kind, "level RMSE in the window (arcmin)", note, short="level RMSE, arcmin")
         for meth, r in methods.items():
             w = r.get("window_rmse_arcmin")
             col.values[meth] = (w["level"], f"{w['level']:.3f}") if w else (None, "-")
         return col
     if any("jump" in r for r in methods.values()):
         a, b = next(r["jump"]["window_s"] for r in methods.values() if "jump" in r)
-        col = Column(name, kind, f"phiU RMS in the jump window {a:g}-{b:g} s (arcmin)")
+        col = Column(name, kind, f"phiU RMS in the jump window {a:g}-{b:g} s (arcmin)", short="phiU in jump, arcmin")
         for meth, r in methods.items():
             v = r.get("jump", {}).get("rms_arcmin", {}).get("during", {}).get("U")
             col.values[meth] = (v, f"{v:.2f}") if v is not None else (None, "-")
         return col
     if kind == "moving-alignment":
-        col = Column(name, kind, "final phiU RMS against the truth (arcmin)")
+        col = Column(name, kind, "final phiU RMS against the truth (arcmin)", short="phiU RMS, arcmin")
         for meth, r in methods.items():
             v = r["final_error_arcmin"]["U"]["rms"]
             col.values[meth] = (v, f"{v:.2f}")
         return col
     if has_init:
         band = next(iter(methods.values()))["settling_time_s"]["band_arcmin"] if methods else 0
-        col = Column(name, kind, f"azimuth settling, mean (s, {band:g} arcmin band)")
+        col = Column(name, kind, f"azimuth settling, mean (s, {band:g} arcmin band)", short="settling, s")
         for meth, r in methods.items():
             v, frac = r["settling_time_s"]["U"]["mean"], r.get("settled_fraction_U", 1.0)
             col.values[meth] = (v, f"{v:.0f}" + (f" ({frac:.0%} of runs settle)" if frac < 1 else ""))
         return col
     lim = metrics["limits_arcmin"]["U"]
-    col = Column(name, kind, "final phiU RMS about the limit (arcmin)", f"limit {lim:.2f} arcmin")
+    col = Column(name, kind, "final phiU RMS about the limit (arcmin)", f"limit {lim:.2f} arcmin",
+                 short="phiU about limit, arcmin")
     for meth, r in methods.items():
         v = _rms_about(r["final_error_arcmin"]["U"], lim)
         col.values[meth] = (v, f"{v:.2f}")
@@ -201,16 +204,18 @@ def write_page(report_md):
 
 def _scoreboard_html(columns):
     methods = _methods(columns)
-    head = "".join(f'<th><a href="{html.escape(c.scenario)}/report.html">{html.escape(c.scenario)}</a><br>'
-                   f"<small>{html.escape(c.figure)}" + (f"; {html.escape(c.note)}" if c.note else "") + "</small></th>"
+    head = "".join(f'<th title="{html.escape(c.figure)}"><a href="{html.escape(c.scenario)}/report.html">'
+                   f"{html.escape(c.scenario)}</a><br><small>{html.escape(c.short or c.figure)}</small></th>"
                    for c in columns)
     rows = []
     for m in methods:
         cells = "".join(f'<td class="{grade(c, m)}">{html.escape(c.values[m][1])}</td>' if m in c.values else
                         '<td class="none">·</td>' for c in columns)
         rows.append(f"<tr><td><code>{html.escape(m)}</code></td>{cells}</tr>")
+    legend = "".join(f"<li><b>{html.escape(c.scenario)}</b>: {html.escape(c.figure)}"
+                     + (f"; {html.escape(c.note)}" if c.note else "") + "</li>" for c in columns)
     return (f'<div class="scroll"><table id="scoreboard">\n<tr><th>method</th>{head}</tr>\n' + "\n".join(rows)
-            + "\n</table></div>")
+            + f"\n</table></div>\n<p>The columns:</p>\n<ul>{legend}</ul>")
 
 
 def _provenance_rows(prov, wall_total):
