@@ -198,19 +198,22 @@ def _jump_section(m):
 
 
 def _table(m, kind):
-    """The final-error table; the stationary limit's row only where it applies, a diverged method marked."""
+    """The final-error table; the stationary limit's row and the settling column only where they apply (the
+    scenario kind), a diverged method marked."""
     lim, bad = m["limits_arcmin"], set(m.get("diverged", []))
-    rows = ["| method | phiE mean (std) | phiN mean (std) | phiU mean (std) | phiU rms | settling U (s, band "
-            f"{next(iter(m['methods'].values()))['settling_time_s']['band_arcmin'] if m['methods'] else ''} arcmin) "
-            "| wall (s) |", "|---|---|---|---|---|---|---|"]
+    settle = fg.decorations(kind)["band"]
+    band = next(iter(m["methods"].values()))["settling_time_s"]["band_arcmin"] if m["methods"] else ""
+    rows = ["| method | phiE mean (std) | phiN mean (std) | phiU mean (std) | phiU rms |"
+            + (f" settling U (s, band {band} arcmin) |" if settle else "") + " wall (s) |",
+            "|---" * (7 if settle else 6) + "|"]
     if fg.decorations(kind)["limit"]:
-        rows.append(f"| *theoretical limit* | {lim['E']:.3f} | {lim['N']:.3f} | {lim['U']:.3f} | | | |")
+        rows.append(f"| *theoretical limit* | {lim['E']:.3f} | {lim['N']:.3f} | {lim['U']:.3f} | |{' |' if settle else ''} |")
     for name, r in m["methods"].items():
         f = r["final_error_arcmin"]
         s = r["settling_time_s"]["U"]
         rows.append(f"| {name}{' **(diverged)**' if name in bad else ''} | {f['E']['mean']:.3f} ({f['E']['std']:.3f}) "
                     f"| {f['N']['mean']:.3f} ({f['N']['std']:.3f}) | {f['U']['mean']:.3f} ({f['U']['std']:.3f}) "
-                    f"| {f['U']['rms']:.3f} | {s['mean']:.1f} | {r['wall_s']:.2f} |")
+                    f"| {f['U']['rms']:.3f} |" + (f" {s['mean']:.1f} |" if settle else "") + f" {r['wall_s']:.2f} |")
     if bad:
         rows += ["", f"**Diverged**: {', '.join(f'`{n}`' for n in m['diverged'])}: its error over the last "
                  f"{100 * fg.TAIL_FRACTION:g} % of the record (median over runs of the RMS) is more than "
