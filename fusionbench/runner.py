@@ -32,6 +32,23 @@ BATCH_BYTES = 200e6
 
 
 @dataclass
+class BatchOutcome:
+    """One method on one batch of runs: what the runner keeps before the batches are joined.
+
+    ``t`` (M,) s and ``phi`` (R, M, 3) rad are the decimated history, ``phi_end`` (R, 3) rad the misalignment at
+    the last sample, ``wall_s`` the method's time on the batch, ``per_run`` per-run figures over the batch's runs
+    (arrays, or dicts of arrays, with the runs first), ``figures`` the scalar figures the method reports."""
+
+    description: str
+    t: np.ndarray
+    phi: np.ndarray
+    phi_end: np.ndarray
+    wall_s: float
+    per_run: dict
+    figures: dict
+
+
+@dataclass
 class MethodOutcome:
     """One method's results over all runs: history times t (M,) s, misalignment phi (R, M, 3) rad."""
 
@@ -107,7 +124,7 @@ def _run_unit(scn, name, first_run, runs, seed, duration, refusals=False):
 
 
 def _align_batch(scn, name, sim, first_run, refusals):
-    """One method on one simulated batch: its outcome tuple, or its refusal message."""
+    """One method on one simulated batch: its BatchOutcome, or its refusal message."""
     traj, data, vref, init = sim
     method = scn.method(name)
     desc = method.description
@@ -150,7 +167,7 @@ def _align_batch(scn, name, sim, first_run, refusals):
     # what a method reports about itself: scalar figures and (R, M) series kept like the history
     extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.extra.get("series", {}).items()}
     figures = {k: float(v) for k, v in res.extra.get("figures", {}).items()}
-    return desc, t_h, phi_h, phi[:, -1], wall, extra, figures
+    return BatchOutcome(desc, t_h, phi_h, phi[:, -1], wall, extra, figures)
 
 
 #: Spacing of the record prefixes on which a smoother's settling is measured, s.
@@ -304,15 +321,13 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         if any(isinstance(p, str) for p in parts):  # refused on some batch: the first message stands for all
             refused[name] = next(p for p in parts if isinstance(p, str))
             continue
-        desc, t_h = parts[0][0], parts[0][1]
-        phi_h = np.concatenate([p[2] for p in parts])
-        phi_end = np.concatenate([p[3] for p in parts])
-        extra = {"phi_end": phi_end, "figures": parts[0][6]}
-        for key in parts[0][5]:
-            val = parts[0][5][key]
-            extra[key] = ({k: np.concatenate([p[5][key][k] for p in parts]) for k in val} if isinstance(val, dict)
-                          else np.concatenate([p[5][key] for p in parts]))
-        outcomes[name] = MethodOutcome(name, desc, t_h, phi_h, sum(p[4] for p in parts), extra)
+        first = parts[0]
+        extra = {"phi_end": np.concatenate([p.phi_end for p in parts]), "figures": first.figures}
+        for key, val in first.per_run.items():
+            extra[key] = ({k: np.concatenate([p.per_run[key][k] for p in parts]) for k in val} if isinstance(val, dict)
+                          else np.concatenate([p.per_run[key] for p in parts]))
+        outcomes[name] = MethodOutcome(name, first.description, first.t, np.concatenate([p.phi for p in parts]),
+                                       sum(p.wall_s for p in parts), extra)
     return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits, refused)
 
 
