@@ -25,7 +25,7 @@ from sklearn.model_selection import GridSearchCV, train_test_split
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
-from fusionbench.io import atomic_open
+from fusionbench.imufiles import atomic_open
 from fusionbench.units import DEG
 
 from .network import simulated_peak_error

@@ -89,7 +89,7 @@ def _method_notes(cls):
 
 
 def _cmd_align(args):
-    from .io import IMUFileError, read_imu
+    from .imufiles import IMUFileError, read_imu
 
     noise = None if args.imu is None else load_spec(args.imu)
     method = load_method(args.method, imu=noise)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import markdown
 
-from .io import atomic_open
+from .imufiles import atomic_open
 
 #: A cell within this factor of its column's best is drawn good, within POOR_FACTOR fair, beyond it poor.
 GOOD_FACTOR = 1.25

@@ -16,7 +16,7 @@ import numpy as np
 from . import figures as fg
 from . import units
 from .figures import plt, save_png  # noqa: F401 (plt, save_png: used by the methods' own figures)
-from .io import atomic_open
+from .imufiles import atomic_open
 from .runner import write_metrics
 
 

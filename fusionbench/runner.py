@@ -20,7 +20,7 @@ from . import imu as imu_mod
 from . import earth, metrics, units
 from .aligner import check_time_rule, is_causal
 from .imudata import IMUData
-from .io import atomic_open
+from .imufiles import atomic_open
 from .progress import bar as progress_bar
 
 #: Longest history kept per method for figures (points).

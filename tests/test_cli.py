@@ -11,7 +11,7 @@ import pytest
 
 from fusionbench import attitude, trajectory as tj, units
 from fusionbench.imu import PRESETS, simulate
-from fusionbench.io import write_csv
+from fusionbench.imufiles import write_csv
 
 D = np.pi / 180
 

@@ -12,7 +12,7 @@ from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner,
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Aligner, Site
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.io import write_csv
+from fusionbench.imufiles import write_csv
 
 D = np.pi / 180
 LAT = 34 * D

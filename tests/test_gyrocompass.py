@@ -13,7 +13,7 @@ from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, u
 from fusionbench.aligner import Site
 from fusionbench.compass import AzimuthFit, azimuth_from_commands, correct_azimuth
 from fusionbench.imu import PRESETS, IMUSpec, simulate
-from fusionbench.io import write_csv
+from fusionbench.imufiles import write_csv
 
 D = np.pi / 180
 

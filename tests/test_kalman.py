@@ -11,7 +11,7 @@ from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner, discretize, e
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.io import write_csv
+from fusionbench.imufiles import write_csv
 
 D = np.pi / 180
 LAT = 34 * D

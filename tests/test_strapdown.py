@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fusionbench import attitude, earth, trajectory as tj, units
-from fusionbench.io import read_psins
+from fusionbench.imufiles import read_psins
 from fusionbench.strapdown import NavState, Strapdown
 from tests.conftest import DATA, load_fixture
 

@@ -20,7 +20,7 @@ from fusionbench import attitude, units
 from fusionbench.aligner import (AlignmentResult, Site, available_methods, check_time_rule, is_causal,
                                  load_method, supports)
 from fusionbench.imudata import IMUData
-from fusionbench.io import read_imu, write_csv, write_npz, write_psins
+from fusionbench.imufiles import read_imu, write_csv, write_npz, write_psins
 from tests import independent
 
 METHODS = sorted(available_methods())

@@ -1,4 +1,4 @@
-"""Tests of fusionbench.io: writer/reader round trips, the PSINS fixture, bad files, atomic writes."""
+"""Tests of fusionbench.imufiles: writer/reader round trips, the PSINS fixture, bad files, atomic writes."""
 
 import json
 import os
@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import fusionbench.io as fio
+import fusionbench.imufiles as fio
 from fusionbench.attitude import dcm_to_euler
 from fusionbench.imudata import IMUData
-from fusionbench.io import IMUFileError, read_imu, write_csv, write_npz, write_psins
+from fusionbench.imufiles import IMUFileError, read_imu, write_csv, write_npz, write_psins
 from fusionbench.units import ARCSEC, DEG
 
 DATA = Path(__file__).parent / "data"
