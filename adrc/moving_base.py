@@ -242,7 +242,7 @@ Without a reference: a stationary or swaying base, checked
 vref=None means a zero reference. A base that moves would be read as tilted (a constant horizontal
 acceleration a is a tilt of a / g to first order: the specific force cannot tell) and the heading
 would come out wrong, so it is refused, with a ValueError naming the method and the figure: without an
-initial attitude by the inertial-frame coarse start (:class:`baselines.coarse.InertialCoarseAligner`:
+initial attitude by the inertial-frame coarse start (:class:`fusionbench.coarse.InertialCoarseAligner`:
 its fit residual for a velocity change during its 60 s, the specific force's excess over gravity for a
 lasting acceleration), and in any case when the mean specific force over the record exceeds normal
 gravity by more than ``max_gravity_excess`` (3 mg; a^2 / 2 g^2 = 4.9 mg at 0.1 g, less the Eotvos effect
@@ -274,6 +274,7 @@ from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_
                                  check_not_accelerating, initial_attitude, variant)
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
+from fusionbench.coarse import InertialCoarseAligner
 from fusionbench.compass import check_compass_latitude
 from fusionbench.strapdown import NavState, Strapdown
 
@@ -419,7 +420,7 @@ class ESOTDAligner:
         Runs whose |psi_hat| exceeds this (deg) are not corrected at a feedback instant.
     coarse_s : float
         Without an initial attitude, the inertial-frame coarse alignment runs this long first, s (with
-        ``vref`` if given; without, it refuses a moving base: :class:`baselines.coarse.InertialCoarseAligner`).
+        ``vref`` if given; without, it refuses a moving base: :class:`fusionbench.coarse.InertialCoarseAligner`).
     max_gravity_excess : float
         Without a reference, the mean specific force may exceed normal gravity by this much (in g,
         3e-3) before the base is taken as accelerating and refused (a constant acceleration a raises it
@@ -548,8 +549,6 @@ class ESOTDAligner:
             if not np.all(np.isfinite(vref)):
                 raise ValueError("vref: expected finite velocities, found NaN or inf")
         if init is None:  # any heading: inertial-frame coarse alignment first
-            from baselines.coarse import InertialCoarseAligner
-
             coarse = InertialCoarseAligner(history_points=20, max_gravity_excess=self.max_gravity_excess,
                                            caller=self.name)
             return coarse_then_fine(imu, site, vref, _WithReference(coarse, vref), self.coarse_s,

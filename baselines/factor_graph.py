@@ -186,7 +186,7 @@ from fusionbench.attitude import dcm_to_rotvec, orthonormalize
 from fusionbench.imu import IMUSpec, load_spec
 from fusionbench.imudata import IMUData
 
-from .coarse import InertialCoarseAligner
+from fusionbench.coarse import InertialCoarseAligner
 from .graph_support import (Posterior, _interval_rotations, _propagate, compensated_increments,  # noqa: F401
                             keyframe_counts, marginal_sigmas, residual_statistics, tile_increments, tile_means,
                             tile_scatter, tile_sums, tiles, velocity_error, velocity_factor)
@@ -314,7 +314,7 @@ class FactorGraphAligner:
     huber_k : float
         Huber threshold, in sigmas, of the robust variant.
     coarse : object, optional
-        Aligner used when ``init`` is None (default :class:`baselines.coarse.InertialCoarseAligner`,
+        Aligner used when ``init`` is None (default :class:`fusionbench.coarse.InertialCoarseAligner`,
         which works on a swaying base).
     init_sigma_deg : float or (3,) float, optional
         Sigma of a prior on the attitude of ``init`` at the first keyframe, misalignment E, N, U, deg

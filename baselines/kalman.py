@@ -39,7 +39,7 @@ from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
 
-from .coarse import InertialCoarseAligner
+from fusionbench.coarse import InertialCoarseAligner
 from .filter_bank import ENGINES, FilterBank
 
 NX = 11

@@ -391,7 +391,7 @@ def coarse_then_fine(imu: IMUData, site: Site, vref, coarse, coarse_s: float, fi
     """Initialise with a coarse aligner on the first ``coarse_s`` seconds, then run ``fine`` on the rest.
 
     For fine aligners that need an initial attitude within a few degrees but must accept any
-    heading. ``coarse`` is an aligner (e.g. ``baselines.coarse.InertialCoarseAligner``);
+    heading. ``coarse`` is an aligner (e.g. ``fusionbench.coarse.InertialCoarseAligner``);
     ``fine(imu_rest, vref_rest, C0)`` returns the fine aligner's AlignmentResult on the remaining
     increments from the coarse attitude ``C0`` (R, 3, 3). The histories are joined; arrays of the
     fine result's ``extra`` shaped (R, M, ...) get NaN over the coarse part.

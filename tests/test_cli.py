@@ -72,11 +72,11 @@ def test_align_refuses_an_impossible_latitude_and_an_unknown_method(tmp_path):
 
 def test_run_check_and_regression(tmp_path):
     out = tmp_path / "rep"
-    r = cli("run", "static-34n", "--quick", "--runs", 2, "--out", out, "--methods", "coarse,baselines.coarse:InertialCoarseAligner")
+    r = cli("run", "static-34n", "--quick", "--runs", 2, "--out", out, "--methods", "coarse,fusionbench.coarse:InertialCoarseAligner")
     assert r.returncode == 0, r.stderr
     m = json.loads((out / "metrics.json").read_text())
     assert m["quick"] is True and m["runs"] == 2
-    assert set(m["methods"]) == {"coarse", "baselines.coarse:InertialCoarseAligner"}
+    assert set(m["methods"]) == {"coarse", "fusionbench.coarse:InertialCoarseAligner"}
     assert (out / "report.md").exists() and (out / "errors.png").exists()
     _check_provenance(m["provenance"], runs=2)
     ref = tmp_path / "ref.json"

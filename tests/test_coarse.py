@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from baselines.coarse import CoarseAligner, InertialCoarseAligner, gravity_integral_inertial
+from fusionbench.coarse import CoarseAligner, InertialCoarseAligner, gravity_integral_inertial
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Site
 from fusionbench.imu import IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
@@ -113,7 +113,7 @@ def test_a_noisy_reference_costs_what_the_block_fit_leaves():
     # rotation shows only in the earth-rotation curvature g W cosL t^2 / 2 (5-26 m/s over the fit blocks),
     # 95 % of which a tilt (linear in t) mimics, so sigma = 2.7 arcmin about it and fE / fU = 0.1 of that
     # in the east level: a twentieth of a degree. Measured rms over 8 runs: 0.24, 0.008, 2.8 arcmin.
-    from baselines.coarse import velocity_integral_inertial
+    from fusionbench.coarse import velocity_integral_inertial
 
     runs = 8
     tr, data, vref = _accelerating(0.1, 0.1, runs=runs, seed=3)
@@ -131,7 +131,7 @@ def test_a_noisy_reference_costs_what_the_block_fit_leaves():
 def test_the_velocity_integral_is_the_integral_of_the_true_specific_force_in_i0():
     # V_i0 from the reference (motion terms, Coriolis, turning gravity) against the specific force of the
     # truth resolved in i0 and integrated numerically (Simpson on a 0.01-s grid)
-    from baselines.coarse import velocity_integral_inertial
+    from fusionbench.coarse import velocity_integral_inertial
 
     tr = tj.accelerating(-45 * D, mean=(0.0, 0.0, 0.0), accel=2.0, direction=(0.6, 0.8, 0.0), duration=100.0)
     dt = 0.01

@@ -5,7 +5,7 @@ passes only by refusing, the figures do not depend on the worker count, and ``ch
 import numpy as np
 import pytest
 
-from baselines.coarse import CoarseAligner
+from fusionbench.coarse import CoarseAligner
 from fusionbench import attitude, metrics, scenarios, units
 from fusionbench.aligner import MAX_BIAS_TO_EARTH_RATE, Supports, azimuth_bias_ratio
 from fusionbench.check import compare

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from adrc.moving_base import ESOTDAligner
-from baselines.coarse import InertialCoarseAligner
+from fusionbench.coarse import InertialCoarseAligner
 from baselines.kalman import KalmanAligner
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Site

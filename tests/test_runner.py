@@ -226,7 +226,7 @@ class WholeRecordCoarse:
     causal = False
 
     def align(self, imu, site, vref=None, init=None):
-        from baselines.coarse import CoarseAligner
+        from fusionbench.coarse import CoarseAligner
         from fusionbench.aligner import AlignmentResult
 
         res = CoarseAligner(history_points=60).align(imu, site)
@@ -237,7 +237,7 @@ def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(t
     # the whole-record stand-in reports, on each prefix of the record, what the causal coarse alignment
     # reports at the prefix's end; its own history (constant at its final value) would claim it settled at
     # once. Measured on prefixes every 25 s, its settling is the causal method's settling read at those times.
-    from baselines.coarse import CoarseAligner
+    from fusionbench.coarse import CoarseAligner
     from fusionbench import metrics, units
     from fusionbench.imu import IMUData, simulate
 

@@ -1,4 +1,4 @@
-"""The inertial-frame coarse alignment's relevelling (:class:`baselines.coarse.InertialCoarseAligner`): the level
+"""The inertial-frame coarse alignment's relevelling (:class:`fusionbench.coarse.InertialCoarseAligner`): the level
 of each attitude from the specific force of the last seconds, where that is better than the fit's.
 
 Arrays as in the aligner: ``C_bn`` (R, H, 3, 3) the history at the kept indices ``hist`` (H,) of the kept samples
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.attitude import orthonormalize, skew
+from . import earth
+from .attitude import orthonormalize, skew
 
 #: Sub-windows of the relevelling window whose scatter tells a base's own motion (no reference given).
 SUBWINDOWS = 4

@@ -27,12 +27,12 @@ import numpy as np
 
 from scipy.spatial.transform import Rotation
 
-from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_not_accelerating
-from fusionbench.imu import load_spec
-from fusionbench.attitude import rotvec_to_dcm
-from fusionbench.imudata import IMUData
-from fusionbench.strapdown import body_increments
+from . import earth
+from .aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_not_accelerating
+from .attitude import rotvec_to_dcm
+from .imu import load_spec
+from .imudata import IMUData
+from .strapdown import body_increments
 
 from .coarse_level import relevel
 
@@ -259,7 +259,7 @@ class InertialCoarseAligner:
         ``eso-td (coarse-i0 start): ...``).
     level_window_s : float or None
         Each attitude's level is taken from the mean specific force of this many seconds before it (20 s;
-        None: the fit's level; see :func:`baselines.coarse_level.relevel`).
+        None: the fit's level; see :func:`fusionbench.coarse_level.relevel`).
     level_noise_max : float
         The largest level error (rad, 3e-5: 0.1 arcmin) the window's noise may cause for the level to be taken
         that way: with a reference, its slope's noise; without, the scatter of the specific force between
