@@ -15,7 +15,7 @@ import numpy as np
 import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
-from fusionbench.attitude import orthonormalize, rotvec_to_dcm
+from fusionbench.attitude import orthonormalize, rotvec_to_dcm, skew
 from fusionbench.strapdown import rodrigues
 
 
@@ -238,10 +238,6 @@ def tile_scatter(r, tile, t, t_kf, weight=None):
     return rss, np.where(line, 3 * (n - 2), 0)
 
 
-def _skew(u):
-    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
-
-
 def velocity_error(R, v, b_acc, z, U, Mb):
     """The velocity factor's error ``v + R (U - Mb b_acc) - z`` (ENU, m/s); arrays broadcast over a
     leading axis (see :func:`velocity_factor`)."""
@@ -283,7 +279,7 @@ def velocity_factor(keys, z, U, Mb, sigma, at):
     Ub = U - Mb @ b_acc
     e0 = v + R @ Ub - z
     H_x, H_b = np.zeros((3, 6)), np.zeros((3, 6))
-    H_x[:, :3] = -R @ _skew(Ub)
+    H_x[:, :3] = -R @ skew(Ub)
     H_b[:, :3] = -R @ Mb
     key_x, key_v, key_b = keys
     jf = gtsam.JacobianFactor(key_x, H_x, key_v, np.eye(3), key_b, H_b, -e0, gtsam.noiseModel.Isotropic.Sigma(3, sigma))
