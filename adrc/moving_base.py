@@ -270,7 +270,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, coarse_then_fine,
+from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, coarse_then_fine,
                                  check_not_accelerating, initial_attitude, variant)
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
@@ -539,15 +539,10 @@ class ESOTDAligner:
             20', 20', 40'). None: an inertial-frame coarse alignment over the first ``coarse_s`` seconds
             first (with the reference when there is one; without, it refuses a moving base).
         """
+        vref, init = check_inputs(imu, vref, init, self.name)
         check_azimuth_observable(self.spec, site, self.name)
         t, dth, dvel = imu.increments()
         R = imu.runs
-        if vref is not None:
-            vref = np.asarray(vref, dtype=float)
-            if vref.shape != (R, t.size, 3):
-                raise ValueError(f"vref: expected shape ({R}, {t.size}, 3), found {vref.shape}")
-            if not np.all(np.isfinite(vref)):
-                raise ValueError("vref: expected finite velocities, found NaN or inf")
         if init is None:  # any heading: inertial-frame coarse alignment first
             coarse = InertialCoarseAligner(history_points=20, max_gravity_excess=self.max_gravity_excess,
                                            caller=self.name)

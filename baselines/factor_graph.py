@@ -181,7 +181,7 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth, units
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, initial_attitude
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, initial_attitude
 from fusionbench.attitude import dcm_to_rotvec, orthonormalize
 from fusionbench.imu import IMUSpec, load_spec
 from fusionbench.imudata import IMUData
@@ -688,6 +688,7 @@ class FactorGraphAligner:
             Naming the field: latitude beyond 89 deg, a record shorter than ``min_duration_s``,
             badly shaped ``vref`` or ``init``, non-finite samples.
         """
+        vref, init = check_inputs(imu, vref, init, self.name)
         vref, init = self._check(imu, site, vref, init)
         t_end, dth, dvel = imu.increments()
         M, dt, R = t_end.size, imu.dt, imu.runs

@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs
 from fusionbench.imu import load_spec
 from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 
@@ -115,6 +115,7 @@ class PIDGyrocompass:
 
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
+        vref, init = check_inputs(imu, vref, init, self.name)
         check_azimuth_observable(self.spec, site, self.name)
         loop = start_loop(self, imu, site, vref, init, self.period)
         h, R, g = loop.period, loop.R, site.g

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable,
+from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable, check_inputs,
                                  initial_attitude)
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
@@ -169,6 +169,7 @@ class KalmanAligner:
     # ---------------------------------------------------------------- alignment
     def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
         """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None)."""
+        vref, init = check_inputs(imu, vref, init, self.name)
         if abs(np.degrees(site.lat)) > 89.0:
             raise ValueError(f"latitude: {self.name} needs |latitude| <= 89 deg, found {np.degrees(site.lat):.3f} deg")
         if imu.duration < self.min_duration_s:

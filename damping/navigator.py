@@ -46,7 +46,7 @@ import numba
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Supports, initial_attitude
+from fusionbench.aligner import AlignmentResult, Supports, check_inputs, initial_attitude
 from fusionbench.imudata import IMUData
 from fusionbench.strapdown import NavState, Strapdown, integrate_compiled
 
@@ -168,6 +168,7 @@ class DampedNavigator:
             coefficients of the networks on the east and north velocity (1: not engaged),
             ``extra["figures"]`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
         """
+        vref, init = check_inputs(imu, vref, init, self.name)
         t, dth, dv = imu.increments()
         if self.scheme == "adaptive" and self.accel_source == "vref" and vref is None:
             raise ValueError("damped-nav vref: accel_source 'vref' needs a reference velocity, found none")

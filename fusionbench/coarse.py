@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import earth
-from .aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_not_accelerating
+from .aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, check_not_accelerating
 from .attitude import rotvec_to_dcm
 from .imu import load_spec
 from .imudata import IMUData
@@ -71,6 +71,7 @@ class CoarseAligner:
 
         Returns an :class:`AlignmentResult` whose last attitude uses the whole recording.
         """
+        vref, init = check_inputs(imu, vref, init, self.name)
         check_azimuth_observable(self.spec, site, self.name)
         t, dth, dv = imu.increments()
         m = min(self.history_points, t.size)
@@ -307,6 +308,7 @@ class InertialCoarseAligner:
             swaying base, checked (see the class docstring): a ValueError naming the method and the
             figure when the data show a moving base.
         """
+        vref, init = check_inputs(imu, vref, init, self.name)
         check_azimuth_observable(self.spec, site, self.name)
         who = self.name if self.caller is None else f"{self.caller} (coarse-i0 start)"
         t, dth, dv = imu.increments()

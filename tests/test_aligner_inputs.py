@@ -1,0 +1,44 @@
+"""One input policy for every registered method: a velocity reference or initial attitude of the wrong shape,
+with NaN, or not a rotation is refused with one line naming the argument, before any work."""
+
+import numpy as np
+import pytest
+
+from fusionbench import trajectory
+from fusionbench.aligner import Site, available_methods, check_inputs, load_method
+from fusionbench.imu import PRESETS, simulate
+
+SITE = Site.from_degrees(34.0, 108.0, 100.0)
+IMU = simulate(trajectory.Trajectory(SITE.lat, SITE.lon, SITE.h, trajectory.EulerSway(mean=np.radians([1.0, 2.0, -30.0])),
+                                     duration=20.0), PRESETS["navigation"], dt=0.1, runs=2, seed=0)
+GOOD_VREF = np.zeros((2, IMU.samples, 3))
+BAD = {
+    "vref": [dict(vref=np.zeros((2, IMU.samples - 1, 3))),           # one sample short
+             dict(vref=np.zeros((2, IMU.samples, 2))),               # no up axis
+             dict(vref=np.where(np.arange(IMU.samples)[None, :, None] == 5, np.nan, GOOD_VREF))],
+    "init": [dict(init=np.eye(3)[:2]),                                # (2, 3)
+             dict(init=np.broadcast_to(np.eye(3), (3, 3, 3))),        # three runs, the data has two
+             dict(init=2.0 * np.eye(3)),                              # not orthonormal
+             dict(init=np.diag([1.0, 1.0, -1.0])),                    # a reflection
+             dict(init=np.full((3, 3), np.nan))],
+}
+
+
+@pytest.mark.parametrize("method", sorted(available_methods()))
+@pytest.mark.parametrize("arg", ["vref", "init"])
+def test_every_method_refuses_a_bad_reference_or_initial_attitude(method, arg):
+    m = load_method(method)
+    for bad in BAD[arg]:
+        kwargs = {"init": np.eye(3)} if arg == "vref" else {}
+        with pytest.raises(ValueError) as exc:
+            m.align(IMU, SITE, **{**kwargs, **bad})
+        msg = str(exc.value)
+        assert f"{arg}:" in msg and "\n" not in msg, (method, msg)
+
+
+def test_check_inputs_broadcasts_a_single_attitude_and_accepts_a_good_reference():
+    vref, init = check_inputs(IMU, GOOD_VREF, np.eye(3), "m")
+    assert vref.shape == (2, IMU.samples, 3) and init.shape == (2, 3, 3) and np.all(init == np.eye(3))
+    assert check_inputs(IMU, GOOD_VREF[0])[0].shape == (2, IMU.samples, 3)  # one reference for every run
+    rates = IMU.__class__(IMU.t, IMU.gyro / IMU.dt, IMU.accel / IMU.dt, kind="rate")
+    assert check_inputs(rates, np.zeros((2, IMU.samples - 1, 3)))[0].shape == (2, IMU.samples - 1, 3)
