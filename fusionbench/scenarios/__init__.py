@@ -3,64 +3,20 @@
 Built-in scenarios ship in this folder (``*.toml``); a user's scenario is any TOML file of the
 same form. Every file is validated on load; an error names the file and the field.
 
-Format (angles in degrees, times in s, sensor figures in the customary units named in the key)::
+The format, every key with its type, unit, default and allowed range (``[quick]``, ``[site]``, ``[attitude]``,
+``[motion]``, ``[imu]`` with its presets, datasheet-unit overrides and noise schedules, ``[vref]``, ``[init]``,
+``[metrics]``, ``[variants.NAME]``, ``[paper]``, ``[platform]`` and the conformance-matrix file), is
+docs/scenarios.md; tests/test_docs.py keeps it in step with :func:`parse`. In short: angles in degrees, times in
+s, sensor figures in the datasheet units named in the key (``gyro_bias_dph``, ``arw_dpsh``, ``vrw_ug_rthz``)::
 
     name = "static-34n"
-    description = "one line"
-    kind = "alignment"          # what the figures and the overview show (KINDS); inferred when absent
-    duration_s = 300.0          # full size
+    duration_s = 300.0
     rate_hz = 100.0
-    runs = 20                   # default Monte Carlo size
-    methods = ["coarse"]        # default methods
-    [quick]                     # reduced sizes for CI (--quick)
-    duration_s = 120.0
-    runs = 3
+    methods = ["coarse", "kf"]
     [site]
     lat_deg = 34.0
-    lon_deg = 108.0
-    height_m = 450.0
-    [attitude]                  # true attitude: mean Euler angles and sway
-    pitch_deg = 0.0
-    roll_deg = 0.0
-    heading_deg = 30.0          # clockwise from north
-    sway_amplitude_deg = [0, 0, 0]   # [pitch, roll, yaw]
-    sway_frequency_hz = [0, 0, 0]
-    sway_phase_deg = [0, 0, 0]
-    [motion]                    # optional translation
-    start_s = 0.0
-    segments = [{accel_mps2 = [0.98, 0, 0], duration_s = 100.0}]
-    disturbance_rms_mps = [0.05, 0.05, 0.05]
-    disturbance_band_hz = [0.1, 2.0]
     [imu]
-    preset = "seed000"          # a key of fusionbench.imu.PRESETS
-    random = true               # false: keep only the deterministic errors (biases, scale factors)
-    gyro_bias_dph = [0.01, 0.01, 0.01]    # optional overrides of the preset
-    accel_bias_ug = [30, 30, 30]
-    arw_dpsh = 0.005
-    vrw_ug_rthz = 6.0
-    schedule = [{start_s = 200, end_s = 400, factor = 100}]
-    [vref]
-    sigma_mps = 0.0
-    schedule = []
-    [init]
-    misalignment_deg = [3, 3, 180]   # initial guess: Euler platform error angles [ax, ay, az] of
-                                     # seed 000 (C_bn' = C_n^n'(alpha) C_bn; = phi when small);
-                                     # absent: the method initialises itself
-    [metrics]
-    settling_band_arcmin = 1.0
-    zoom_from_s = 100.0         # start of the zoomed azimuth figure
-    jump_window_s = [200, 400]  # a noise jump: error RMS before/during/after, peak, re-convergence
-    rmse_window_s = [44200, 49268]   # misalignment RMSE (E, N, U and level) of every method in this window
-    amplitude_windows_s = {before = [0, 10800], after = [16000, 43200]}  # half peak-to-peak per axis
-    compare = ["fixed", "adaptive"]  # baseline and candidate: top-level rmse_<name>_arcmin (level RMSE in
-                                     # rmse_window_s) and reduction_percent = 100 (base - cand) / base
-    [variants.adrc-h1-4s]       # a method with options, usable in `methods` by its name
-    method = "adrc"
-    h1 = 4.0
-    [paper]                     # what the source paper reports, shown beside our figures
-    reference = "seed 000"
-    settling_time_s = {pid = 420, adrc = 250}
-    note = "markdown text for the report"
+    preset = "seed000"
 """
 
 from __future__ import annotations
