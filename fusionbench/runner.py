@@ -284,6 +284,10 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
     if int(seed) < 0:
         raise ValueError(f"seed: expected a non-negative integer, found {seed}")
+    if scn.jump_window_s is not None and scn.jump_window_s[1] >= duration:
+        raise ValueError(f"{scn.source or scn.name}: metrics.jump_window_s {list(scn.jump_window_s)} ends after the "
+                         f"record of {duration:g} s{' (--quick: [quick] duration_s)' if quick else ''}: expected a "
+                         f"window that ends before it")
     n_samples = int(round(duration / scn.dt))
     if batch_size is None:
         batch_size = int(max(1, min(runs, BATCH_BYTES // (n_samples * 48))))

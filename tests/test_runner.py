@@ -34,6 +34,17 @@ def test_builtin_scenarios_load():
     assert np.degrees(s.site.lat) == pytest.approx(34.0)
 
 
+def test_a_jump_window_beyond_the_quick_record_is_one_line_before_the_run(tmp_path):
+    p = tmp_path / "j.toml"
+    p.write_text(TOML.replace("duration_s = 30.0", "duration_s = 60.0") + "[metrics]\njump_window_s = [20, 40]\n"
+                 "[quick]\nduration_s = 30.0\n")
+    scn = scenarios.load(p)  # valid for the full record
+    with pytest.raises(ValueError) as exc:
+        run_scenario(scn, quick=True, progress=False)
+    assert "metrics.jump_window_s" in str(exc.value) and "30 s" in str(exc.value) and str(p) in str(exc.value)
+    assert "\n" not in str(exc.value)
+
+
 def test_scenario_kind_is_given_or_inferred(tmp_path):
     # what the figures draw hangs on it: a stationary limit means nothing in free-inertial navigation
     kinds = {n: scenarios.get(n).kind for n in scenarios.builtin_names()}
