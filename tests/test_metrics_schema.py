@@ -16,22 +16,7 @@ from fusionbench.check import packaged_reference
 SCHEMA = json.loads((Path(__file__).parents[1] / "docs" / "metrics.schema.json").read_text())
 VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
 
-TINY = """
-name = "tiny-jump"
-duration_s = 90.0
-rate_hz = 20.0
-runs = 2
-methods = ["coarse", "kf"]
-[site]
-lat_deg = 34.0
-[imu]
-preset = "navigation"
-[vref]
-sigma_mps = [0.001, 0.001, 0.001]
-schedule = [{start_s = 40, end_s = 60, factor = 100}]
-[metrics]
-jump_window_s = [40, 60]
-"""
+TINY = Path(__file__).parent / "data" / "tiny-jump.toml"  # static, reference noise x100 from 40 to 60 s
 
 
 def test_the_schema_is_a_valid_json_schema():
@@ -48,9 +33,7 @@ def test_every_reference_metrics_file_follows_the_schema(quick):
 
 
 def test_a_fresh_run_through_the_command_line_follows_the_schema(tmp_path):
-    toml = tmp_path / "tiny.toml"
-    toml.write_text(TINY)
-    r = subprocess.run([sys.executable, "-m", "fusionbench", "run", str(toml), "--out", str(tmp_path / "o")],
+    r = subprocess.run([sys.executable, "-m", "fusionbench", "run", str(TINY), "--out", str(tmp_path / "o")],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     m = json.loads((tmp_path / "o" / "metrics.json").read_text())

@@ -20,33 +20,15 @@ from fusionbench.overview import GOOD_FACTOR, _flag_diverged, grade, headline, w
 from fusionbench.report import write_scenario_report
 from fusionbench.runner import run_scenario
 
-TINY = """
-name = "tiny-jump"
-description = "static, a x100 noise jump on the reference from 40 to 60 s"
-duration_s = 90.0
-rate_hz = 20.0
-runs = 2
-methods = ["coarse", "kf"]
-[site]
-lat_deg = 34.0
-[imu]
-preset = "navigation"
-[vref]
-sigma_mps = [0.001, 0.001, 0.001]
-schedule = [{start_s = 40, end_s = 60, factor = 100}]
-[metrics]
-jump_window_s = [40, 60]
-"""
+TINY = Path(__file__).parent / "data" / "tiny-jump.toml"  # static, reference noise x100 from 40 to 60 s
 
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     """A two-scenario run written as `fusionbench run all` writes it: reports, pages and the overview."""
     out = tmp_path_factory.mktemp("run")
-    toml = out / "tiny-jump.toml"
-    toml.write_text(TINY)
     results = []
-    for scn, methods in ((scenarios.get("static-34n"), ["coarse", "coarse-i0"]), (scenarios.load(toml), None)):
+    for scn, methods in ((scenarios.get("static-34n"), ["coarse", "coarse-i0"]), (scenarios.load(TINY), None)):
         res = run_scenario(scn, methods=methods, runs=2, seed=0, quick=True, progress=False)
         res.metrics["provenance"] = provenance.collect(seed=0, runs=2, duration_s=res.metrics["duration_s"],
                                                       quick=True, wall_s=1.0)
