@@ -94,7 +94,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, variant
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, variant
+from fusionbench.inputs import check_inputs
 from fusionbench.imu import load_spec
 from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 from fusionbench.strapdown import rodrigues

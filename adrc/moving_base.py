@@ -270,8 +270,9 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, coarse_then_fine,
+from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, coarse_then_fine,
                                  check_not_accelerating, initial_attitude, variant)
+from fusionbench.inputs import check_inputs
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.coarse import InertialCoarseAligner

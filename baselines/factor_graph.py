@@ -181,7 +181,8 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth, units
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, initial_attitude
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, initial_attitude
+from fusionbench.inputs import check_inputs
 from fusionbench.attitude import dcm_to_rotvec, orthonormalize
 from fusionbench.imu import IMUSpec, load_spec
 from fusionbench.imudata import IMUData

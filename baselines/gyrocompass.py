@@ -45,7 +45,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
+from fusionbench.inputs import check_inputs
 from fusionbench.imu import load_spec
 from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
 

@@ -33,8 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable, check_inputs,
+from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable,
                                  initial_attitude)
+from fusionbench.inputs import check_inputs
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown

@@ -46,7 +46,8 @@ import numba
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Supports, check_inputs, initial_attitude
+from fusionbench.aligner import AlignmentResult, Supports, initial_attitude
+from fusionbench.inputs import check_inputs
 from fusionbench.imudata import IMUData
 from fusionbench.strapdown import NavState, Strapdown, integrate_compiled
 

@@ -28,8 +28,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import earth
-from .aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_inputs, check_not_accelerating
+from .aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_not_accelerating
 from .attitude import rotvec_to_dcm
+from .inputs import check_inputs
 from .imu import load_spec
 from .imudata import IMUData
 from .strapdown import body_increments

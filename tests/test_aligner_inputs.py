@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from fusionbench import trajectory
-from fusionbench.aligner import Site, available_methods, check_inputs, load_method
+from fusionbench.aligner import Site, available_methods, load_method
+from fusionbench.inputs import check_inputs
 from fusionbench.imu import PRESETS, simulate
 
 SITE = Site.from_degrees(34.0, 108.0, 100.0)
