@@ -7,7 +7,7 @@ forward, z up). gtsam's ``PreintegrationParams.MakeSharedU(g)`` uses a z-up navi
 gravity ``[0, 0, -g]``, which is ENU here, and its body frame is RFU, so a pose's rotation is the
 attitude ``C_bn`` (body to ENU) and its translation the position in ENU metres from the start.
 Misalignment ``phi = [phiE, phiN, phiU]`` (rad) is defined by ``C_bn_est = (I - [phi x]) C_bn_true``.
-The graph is a smoother (``causal = False``): every keyframe's estimate uses the whole record.
+The graph is a smoother (the result's ``causal`` is False): every keyframe's estimate uses the whole record.
 
 The graph (one per recording)
 -----------------------------
@@ -261,7 +261,7 @@ class FactorGraphAligner:
     """Factor-graph fine alignment (method ``gtsam``): gtsam ImuFactors with earth-rate Coriolis,
     velocity factors from every reference sample and a bias with zero-mean priors, solved by
     Levenberg-Marquardt (see the module docstring). A smoother: each keyframe's estimate uses the
-    whole record (``causal = False``).
+    whole record (the result's ``causal`` is False).
 
     Parameters
     ----------
@@ -274,7 +274,7 @@ class FactorGraphAligner:
         what :class:`AdaptiveFactorGraphAligner` estimates). An IMU whose gyro bias hides the earth rate is
         refused (:func:`fusionbench.aligner.check_azimuth_observable`). None:
         seed000's white noise, bias priors 0.1 deg/h and 100 ug, a constant bias. Its name is
-        reported as ``extra["imu_model"]``.
+        reported as the result's ``imu_model``.
     gyro_noise : float or (3,) float, optional
         Gyro white-noise density (angle random walk), rad/sqrt(s); overrides the model's.
     accel_noise : float or (3,) float, optional
@@ -311,7 +311,7 @@ class FactorGraphAligner:
         At most this many graph builds per recording (the robust variant: at least 10, for its
         reweighting).
     marginals : bool
-        Compute ``extra["sigma_phi"]`` and ``extra["sigma_phi_noise"]``.
+        Compute ``sigma_phi`` and ``extra["sigma_phi_noise"]``.
     huber_k : float
         Huber threshold, in sigmas, of the robust variant.
     coarse : object, optional
@@ -329,8 +329,6 @@ class FactorGraphAligner:
     description = ("factor-graph fine alignment (gtsam ImuFactors, earth-rate Coriolis, every reference sample against "
                    "the IMU's velocity at its time, bias priors from the IMU model)")
     robust = False
-    #: A smoother: the estimate at every keyframe uses the whole record.
-    causal = False
     # not sway: with 1-s keyframes under seed 000's Table-1 sway its azimuth carries a second-order bias (-4.3
     # arcmin at 60 N: efficiency 1.6; 0.5-s keyframes -0.7); not tactical gyros: 1.7-5 bounds off (conformance)
     supports = Supports(bases=("static", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05)
@@ -675,12 +673,12 @@ class FactorGraphAligner:
         -------
         AlignmentResult
             ``t`` (K,) keyframe times, s (the last one the last sample); ``C_bn`` (R, K, 3, 3) the
-            optimised attitude at the keyframes, each from the whole record. ``extra``: ``sigma_phi``
-            and ``sigma_phi_noise`` (R, K, 3) marginal misalignment sigmas, rad, ENU (with the bias
-            priors; with the biases known); ``gyro_bias`` (R, 3) rad/s and ``accel_bias`` (R, 3)
+            optimised attitude at the keyframes, each from the whole record (``causal`` False);
+            ``sigma_phi`` (with ``marginals``) and ``extra["sigma_phi_noise"]`` (R, K, 3) marginal misalignment
+            sigmas, rad, ENU (with the bias priors; with the biases known); ``extra``: ``gyro_bias`` (R, 3) rad/s and ``accel_bias`` (R, 3)
             m/s^2, the estimated biases at the last keyframe, body frame; ``iterations``, ``passes``
             (R,) ints (LM iterations, graph builds); ``restarted`` (R,) bool (solved again from the
-            coarse alignment); ``graph_error`` (R,), the final cost; ``keyframe_s``; ``imu_model``,
+            coarse alignment); ``graph_error`` (R,), the final cost; ``keyframe_s``; ``imu_model``
             the IMU model's name (``"default"`` without one).
 
         Raises
@@ -737,13 +735,14 @@ class FactorGraphAligner:
             bg[r], ba[r] = bias.gyroscope(), bias.accelerometer()
             if self.marginals:
                 sig[r], sig_noise[r] = marginal_sigmas(graph, values, C_kf, [B(j) for j in range(int(seg.max()) + 1)])
-        extra = {"sigma_phi": sig, "sigma_phi_noise": sig_noise, "gyro_bias": bg, "accel_bias": ba,
+        extra = {"sigma_phi_noise": sig_noise, "gyro_bias": bg, "accel_bias": ba,
                  "iterations": iters, "passes": passes, "restarted": restarted, "graph_error": cost,
-                 "keyframe_s": self.keyframe_s, "imu_model": self.imu_model}
+                 "keyframe_s": self.keyframe_s}
         for key in (per_run[0] if per_run else {}):
             stacked = np.stack([m[key] for m in per_run])
             extra[key] = stacked[0] if key in self._shared_extra else stacked
-        return AlignmentResult(self.name, t_kf, C_out, extra)
+        return AlignmentResult(self.name, t_kf, C_out, extra, sigma_phi=sig if self.marginals else None,
+                               imu_model=self.imu_model, causal=False)
 
 
 class RobustFactorGraphAligner(FactorGraphAligner):

@@ -84,7 +84,7 @@ class KalmanAligner:
         Noise model of the filter (:func:`fusionbench.imu.load_spec`): a preset name, an IMU spec TOML
         file or an IMUSpec; default the ``navigation`` preset. Its white noises give Q; its bias sigmas
         (fixed part taken as a sigma too) the initial bias covariance, floored so that the prior is never
-        tight (a tight gyro-bias prior biases the tilt). The result's ``extra["imu_model"]`` names it.
+        tight (a tight gyro-bias prior biases the tilt). The result's ``imu_model`` names it.
     vref_sigma : float
         Standard deviation of each velocity-reference sample, m/s: R of each update (floored at 1 mm/s, so that
         an exact reference keeps the update well conditioned). A scenario gives a method with this option the
@@ -238,9 +238,9 @@ class KalmanAligner:
         hist_t.append(out_t)
         hist_C.append(out_C)
         hist_s.append(out_s)
-        extra = {"sigma_phi": np.concatenate(hist_s, axis=1), "gyro_bias": eps_hat, "accel_bias": nab_hat,
-                 "imu_model": self.spec.name}
-        return AlignmentResult(self.name, np.concatenate(hist_t), np.concatenate(hist_C, axis=1), extra)
+        return AlignmentResult(self.name, np.concatenate(hist_t), np.concatenate(hist_C, axis=1),
+                               {"gyro_bias": eps_hat, "accel_bias": nab_hat},
+                               sigma_phi=np.concatenate(hist_s, axis=1), imu_model=self.spec.name)
 
 
 class AdaptiveKalmanAligner(KalmanAligner):

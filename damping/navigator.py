@@ -165,9 +165,9 @@ class DampedNavigator:
         Returns
         -------
         AlignmentResult
-            Attitude after every network step; ``extra["series"]["q_E"]``, ``["q_N"]`` (R, M) the
+            Attitude after every network step; ``series["q_E"]``, ``series["q_N"]`` (R, M) the
             coefficients of the networks on the east and north velocity (1: not engaged),
-            ``extra["figures"]`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
+            ``figures`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
         """
         vref, init = check_inputs(imu, vref, init, self.name)
         t, dth, dv = imu.increments()
@@ -230,7 +230,7 @@ class DampedNavigator:
         if self.scheme == "adaptive":
             figures["map_mse"] = float(self.map().mse_)
         return AlignmentResult(self.name, np.concatenate(ts), np.concatenate(Cs, axis=1),
-                               {"series": {"q_E": q[..., 0], "q_N": q[..., 1]}, "figures": figures})
+                               series={"q_E": q[..., 0], "q_N": q[..., 1]}, figures=figures)
 
     def report_figures(self, folder):
         """Write the network's figures (seed 004 Figs. 4, 5, 6 and 8) into ``folder``; [(file, caption)]."""

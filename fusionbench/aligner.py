@@ -87,21 +87,48 @@ class AlignmentResult:
     C_bn : ndarray, shape (R, M, 3, 3)
         Estimated attitude history (body RFU to ENU) for each of the R recordings: ``C_bn[:, i]`` is the
         attitude at ``t[i]`` estimated from the samples up to and including ``t[i]`` (for a method that
-        is not causal, a smoother, from the whole record: see :attr:`Aligner.causal`).
+        is not causal, a smoother, from the whole record: ``causal`` False).
     extra : dict
-        Method-specific histories or figures (e.g. ``sigma_phi`` (R, M, 3) rad for filters).
+        Method-specific diagnostics nobody else reads (estimated biases, iteration counts, ...).
+    sigma_phi : ndarray, shape (R, M, 3), optional
+        The method's own predicted misalignment sigma (E, N, U), rad (filters and smoothers); the runner scores
+        its consistency (actual over predicted error at the end).
+    series : dict of str to ndarray, shape (R, M), optional
+        Other histories the method reports about itself at ``t`` (e.g. a damping coefficient); the report draws
+        them, labelled by the method's ``series_labels``.
+    figures : dict of str to float, optional
+        Scalar figures the method reports about itself; they are written into its metrics.json entry.
+    imu_model : str, optional
+        Name of the IMU noise model the method assumed (its ``--imu``), for the record.
+    causal : bool
+        Whether ``C_bn[:, i]`` uses only the samples up to ``t[i]`` (a filter, a loop) or the whole record
+        (False: a smoother).
     """
 
     method: str
     t: np.ndarray
     C_bn: np.ndarray
     extra: dict = field(default_factory=dict)
+    sigma_phi: np.ndarray | None = None
+    series: dict = field(default_factory=dict)
+    figures: dict = field(default_factory=dict)
+    imu_model: str | None = None
+    causal: bool = True
 
     def __post_init__(self):
         self.t = np.asarray(self.t, dtype=float)
         self.C_bn = np.asarray(self.C_bn, dtype=float)
         if self.C_bn.ndim != 4 or self.C_bn.shape[1:] != (self.t.size, 3, 3):
             raise ValueError(f"AlignmentResult C_bn: expected shape (runs, {self.t.size}, 3, 3), found {self.C_bn.shape}")
+        shape = self.C_bn.shape[:2]
+        if self.sigma_phi is not None:
+            self.sigma_phi = np.asarray(self.sigma_phi, dtype=float)
+            if self.sigma_phi.shape != shape + (3,):
+                raise ValueError(f"AlignmentResult sigma_phi: expected shape {shape + (3,)}, found {self.sigma_phi.shape}")
+        for key, val in self.series.items():
+            if np.shape(val) != shape:
+                raise ValueError(f"AlignmentResult series {key!r}: expected shape {shape}, found {np.shape(val)}")
+        self.figures = {k: float(v) for k, v in self.figures.items()}
 
     @property
     def C_bn_final(self):
@@ -242,22 +269,16 @@ def supports(method) -> Supports:
     return getattr(method, "supports", None) or Supports()
 
 
-def is_causal(method) -> bool:
-    """Whether a method's estimate at t uses only the samples up to t (its ``causal`` attribute, default True)."""
-    return bool(getattr(method, "causal", True))
-
-
 @runtime_checkable
 class Aligner(Protocol):
     """Protocol of an alignment method (structural: no base class needed).
 
     ``min_duration_s`` is the shortest recording the method accepts, s. Optional attributes:
     ``supports`` (a :class:`Supports`: the bases and latitudes it claims; default static and sway up to
-    80 deg), ``causal`` (default True; False for a smoother, whose every estimate uses the whole record:
-    its settling is then measured on growing prefixes), for methods that use an IMU noise model, an
+    80 deg), for methods that use an IMU noise model, an
     ``imu`` constructor option (:func:`uses_noise_model`), and for the report: ``events(init_given)`` (its own
     stages, e.g. a coarse hand-over, as ``[(t_s, label)]`` or ``[(t0_s, t1_s, label)]``: :mod:`fusionbench.figures`),
-    ``series_labels`` (axis labels with units of the series in ``extra["series"]``) and ``report_figures(folder)``.
+    ``series_labels`` (axis labels with units of the result's ``series``) and ``report_figures(folder)``.
     """
 
     name: str
@@ -405,11 +426,14 @@ def coarse_then_fine(imu: IMUData, site: Site, vref, coarse, coarse_s: float, fi
     rest = IMUData(t[k0:], dth[:, k0:], dv[:, k0:], "increment")
     res = fine(rest, None if vref is None else np.asarray(vref)[:, k0:], first.C_bn_final)
     m = first.t.size
-    extra = {}
-    for key, val in res.extra.items():
+
+    def padded(val):  # a history of the fine stage, NaN over the coarse one
         if isinstance(val, np.ndarray) and val.ndim >= 2 and val.shape[:2] == res.C_bn.shape[:2]:
-            pad = np.full((val.shape[0], m) + val.shape[2:], np.nan)
-            val = np.concatenate([pad, val], axis=1)
-        extra[key] = val
-    return AlignmentResult(res.method, np.concatenate([first.t, res.t]),
-                           np.concatenate([first.C_bn, res.C_bn], axis=1), extra)
+            return np.concatenate([np.full((val.shape[0], m) + val.shape[2:], np.nan), val], axis=1)
+        return val
+
+    return AlignmentResult(res.method, np.concatenate([first.t, res.t]), np.concatenate([first.C_bn, res.C_bn], axis=1),
+                           {k: padded(v) for k, v in res.extra.items()},
+                           sigma_phi=None if res.sigma_phi is None else padded(res.sigma_phi),
+                           series={k: padded(np.asarray(v)) for k, v in res.series.items()}, figures=res.figures,
+                           imu_model=res.imu_model, causal=res.causal)

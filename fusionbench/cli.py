@@ -107,7 +107,7 @@ def _cmd_align(args):
     if args.json:
         print(json.dumps(out))
     else:
-        model = res.extra.get("imu_model")
+        model = res.imu_model
         print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))
         print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
     return 0

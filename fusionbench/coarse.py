@@ -272,9 +272,6 @@ class InertialCoarseAligner:
 
     name = "coarse-i0"
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)
-    #: Not causal: every attitude of the history uses the fit over the second half of the whole record
-    #: (its settling is measured on prefixes; the attitude at the last sample is what a user gets).
-    causal = False
     description = "inertial-frame coarse alignment (gravity turning with the earth), robust to sway; in motion with vref"
     min_duration_s = 10.0
 
@@ -387,4 +384,7 @@ class InertialCoarseAligner:
         if self.level_window_s:
             C_bn = relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site, self.level_window_s,
                            self.level_noise_max)
-        return AlignmentResult(self.name, t[keep][hist], C_bn, {"fit_residual_mps": resid, "gravity_excess": excess})
+        # not causal: every attitude of the history uses the fit over the second half of the whole record (its
+        # settling is measured on prefixes; the attitude at the last sample is what a user gets)
+        return AlignmentResult(self.name, t[keep][hist], C_bn, {"fit_residual_mps": resid, "gravity_excess": excess},
+                               causal=False)

@@ -18,7 +18,7 @@ from joblib import Parallel, delayed
 
 from . import imu as imu_mod
 from . import earth, metrics, units
-from .aligner import check_time_rule, is_causal
+from .aligner import check_time_rule
 from .imudata import IMUData
 from .imufiles import atomic_open
 from .progress import bar as progress_bar
@@ -144,7 +144,7 @@ def _align_batch(scn, name, sim, first_run, refusals):
     phi = metrics.misalignment_history(res.C_bn, truth_C)
     limit_u = _limits(scn, traj, res.t, truth_C)[:, 2]  # (M,) rad: it moves with the attitude on a sway
     band = scn.settling_band_arcmin * units.ARCMIN
-    if is_causal(method):
+    if res.causal:
         settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
         done = metrics.settled(phi[..., 2], band, limit_u)
     else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
@@ -154,7 +154,8 @@ def _align_batch(scn, name, sim, first_run, refusals):
     t_h, phi_h = res.t[idx], phi[:, idx]
     last = res.t >= res.t[-1] - LEVEL_WINDOW_S
     level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-    extra = {"level_ms": level_ms, "sigma_end": res.extra.get("sigma_phi", np.full(phi.shape, np.nan))[:, -1],
+    extra = {"level_ms": level_ms, "sigma_end": np.full((phi.shape[0], 3), np.nan) if res.sigma_phi is None
+             else res.sigma_phi[:, -1],
              "settle": settle, "settled": done}
     if scn.jump_window_s is not None:
         a, b = scn.jump_window_s
@@ -165,9 +166,8 @@ def _align_batch(scn, name, sim, first_run, refusals):
         extra["reconverge"] = metrics.settling_time(res.t[after], phi[:, after, 2], band, limit_u[after]) - b
     extra.update(_window_figures(scn, res.t, phi))
     # what a method reports about itself: scalar figures and (R, M) series kept like the history
-    extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.extra.get("series", {}).items()}
-    figures = {k: float(v) for k, v in res.extra.get("figures", {}).items()}
-    return BatchOutcome(desc, t_h, phi_h, phi[:, -1], wall, extra, figures)
+    extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.series.items()}
+    return BatchOutcome(desc, t_h, phi_h, phi[:, -1], wall, extra, res.figures)
 
 
 #: Spacing of the record prefixes on which a smoother's settling is measured, s.

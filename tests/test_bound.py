@@ -114,7 +114,7 @@ def test_kalman_monte_carlo_error_matches_the_bound():
                        accel=SensorErrors(bias_sigma=(10 * units.UG,) * 3, white=WHITE.accel.white))
     _, b_kf = metrics.attainable_bound(kf_model, T, trajectory=tr, vref_sigma=vs, vref_dt=0.1, step_s=0.1,
                                        initial_sigma=(1 * D, 1 * D, 5 * D, 0.1, 0.1))
-    assert res.extra["sigma_phi"][0, -1] == pytest.approx(b_kf[-1], rel=0.01)
+    assert res.sigma_phi[0, -1] == pytest.approx(b_kf[-1], rel=0.01)
     assert b_kf[-1, 2] > 1.05 * bound[-1, 2]  # the bias priors matter: this is not the same number
     assert time.perf_counter() - t0 < 40.0
 

@@ -123,7 +123,7 @@ def test_adaptive_equals_fixed_when_the_acceleration_is_small():
     traj, data, vref, init, site = _ship(0.005)
     fixed, adaptive = (_nav(s, data, vref, init, site) for s in ("fixed", "adaptive"))
     on = fixed.t > 1800.0
-    assert np.all(adaptive.extra["series"]["q_E"][:, on] == pytest.approx(q_for_damping(0.5)))
+    assert np.all(adaptive.series["q_E"][:, on] == pytest.approx(q_for_damping(0.5)))
     np.testing.assert_array_equal(adaptive.C_bn, fixed.C_bn)
 
 
@@ -132,11 +132,11 @@ def test_adaptive_lowers_q_to_the_map_during_a_large_acceleration():
     res = _nav("adaptive", data, vref, init, site)
     a, q_target = qmap.training_data(np.array([0.05]))  # the simulated largest q for 0.05 m/s^2
     during = (res.t > 3600.0 + 100.0) & (res.t < 3600.0 + 400.0)
-    assert res.extra["series"]["q_E"][0, during] == pytest.approx(q_target[0], abs=0.05)
-    assert np.all(res.extra["series"]["q_N"][0, res.t > 1800.0] == pytest.approx(q_for_damping(0.5)))  # no north motion
+    assert res.series["q_E"][0, during] == pytest.approx(q_target[0], abs=0.05)
+    assert np.all(res.series["q_N"][0, res.t > 1800.0] == pytest.approx(q_for_damping(0.5)))  # no north motion
     # the network goes back to xi = 0.5 once the lags have forgotten the manoeuvre (5 T after it)
     nav = DampedNavigator("adaptive")
-    assert res.extra["series"]["q_E"][0, -1] == pytest.approx(nav.q_fixed)
+    assert res.series["q_E"][0, -1] == pytest.approx(nav.q_fixed)
     assert nav.release_s == pytest.approx(5 * N.time_constant(nav.q_fixed))
 
 

@@ -52,7 +52,7 @@ def test_is_an_aligner_with_keyframes_ending_at_the_last_sample(noise_free_180):
     assert (fg.name, RobustFactorGraphAligner.name) == ("gtsam", "gtsam-robust")
     assert res.method == "gtsam" and res.t[0] == pytest.approx(0.0) and res.t_end == data.t[-1]
     assert np.diff(res.t) == pytest.approx(np.ones(300))  # 1 s keyframes
-    assert res.C_bn.shape == (1, 301, 3, 3) and res.extra["sigma_phi"].shape == (1, 301, 3)
+    assert res.C_bn.shape == (1, 301, 3, 3) and res.sigma_phi.shape == (1, 301, 3)
     assert list(keyframe_counts(1049, 100)) == list(range(0, 1000, 100)) + [1049]  # short tail merged
     assert list(keyframe_counts(1050, 100)) == list(range(0, 1100, 100)) + [1050]
 
@@ -111,7 +111,7 @@ def test_noisy_data_lands_within_three_predicted_sigmas_of_the_limits():
     fg = FactorGraphAligner(imu=spec)
     unobs = np.array([fg.accel_bias_sigma / site.g, fg.accel_bias_sigma / site.g,
                       fg.gyro_bias_sigma / (earth.OMEGA_IE * np.cos(LAT))])
-    assert res.extra["sigma_phi"][:, -1] == pytest.approx(np.sqrt(unobs**2 + sig_noise**2), rel=0.02)
+    assert res.sigma_phi[:, -1] == pytest.approx(np.sqrt(unobs**2 + sig_noise**2), rel=0.02)
 
 
 def test_a_perfect_imu_on_a_swaying_base_is_aligned_from_the_inertial_coarse_start():

@@ -50,8 +50,6 @@ def test_the_noise_figures_come_from_the_imu_model_and_explicit_figures_override
     assert walk[3:] == pytest.approx(m["gyro_bias_walk"] * np.sqrt(30.0))
     seg, walk = FactorGraphAligner(imu=PRESETS["seed000"])._bias_segments(np.arange(0.0, 301.0))
     assert seg.max() == 0 and not walk.any()  # a constant bias
-    for cls in (FactorGraphAligner, RobustFactorGraphAligner, AdaptiveFactorGraphAligner):
-        assert cls.causal is False
     assert FactorGraphAligner(imu="seed000").imu_model == "seed000"  # a preset name, like the Kalman aligner
     with pytest.raises(ValueError, match="imu"):
         FactorGraphAligner(imu="hal9000")
@@ -221,7 +219,7 @@ def test_on_a_moving_base_gtsam_is_as_accurate_as_kf_and_its_sigma_matches_its_s
     # 1.8 to 2.6 times worse in azimuth on these data
     assert np.all(rms["gtsam"] <= 1.25 * rms["kf"]), rms
     assert rms["gtsam"][2] < 4 * units.ARCMIN
-    assert fg.extra["imu_model"] == scn.imu_spec.name
+    assert fg.imu_model == scn.imu_spec.name
     # the spread about the mean (the fixed 0.01 deg/h bias is common to all runs) against the sigma with
     # the bias known: chi-square with 11 degrees of freedom (99 % of it between 0.24 and 2.25); with the
     # earlier graph's bias priors (0.1 deg/h, 100 ug) it is 10 to 16 on these data
@@ -229,7 +227,7 @@ def test_on_a_moving_base_gtsam_is_as_accurate_as_kf_and_its_sigma_matches_its_s
     chi2 = np.sum((dev / fg.extra["sigma_phi_noise"][:, -1]) ** 2, axis=0) / 11
     assert np.all((chi2 > 0.2) & (chi2 < 2.5)), chi2
     # and the full sigma covers the common part too: the rms over runs stays within it
-    assert np.all(rms["gtsam"] < 2 * np.sqrt(np.mean(fg.extra["sigma_phi"][:, -1] ** 2, axis=0)))
+    assert np.all(rms["gtsam"] < 2 * np.sqrt(np.mean(fg.sigma_phi[:, -1] ** 2, axis=0)))
 
 
 def test_an_attitude_prior_on_init_enters_with_its_weight_like_the_kalman_filters():
@@ -249,7 +247,7 @@ def test_an_attitude_prior_on_init_enters_with_its_weight_like_the_kalman_filter
         kf = KalmanAligner(imu=spec, vref_sigma=0.01, att_sigma_deg=(1.0, 1.0, s_az)).align(data, site, init=guess)
         s_p = np.radians(s_az)
         # the marginal: prior and bias prior combined, 1 / sqrt(1/s_p^2 + 1/s_eps^2)
-        assert fg.extra["sigma_phi"][0, -1, 2] == pytest.approx(1 / np.sqrt(s_p**-2 + s_eps**-2), rel=0.02)
+        assert fg.sigma_phi[0, -1, 2] == pytest.approx(1 / np.sqrt(s_p**-2 + s_eps**-2), rel=0.02)
         phi_fg = attitude.misalignment(fg.C_bn_final[0], C_end)
         phi_kf = attitude.misalignment(kf.C_bn_final[0], C_end)
         assert phi_fg[2] == pytest.approx(phi_kf[2], rel=0.05)

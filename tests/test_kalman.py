@@ -62,7 +62,7 @@ def test_kalman_filter_is_consistent_over_50_monte_carlo_runs():
     vref = simulate_vref(tr, VelocityReferenceSpec((0.01,) * 3), data.t, runs=runs, seed=4)
     res = KalmanAligner(imu=spec, vref_sigma=0.01).align(data, Site(LAT, 1.9, 450.0), vref=vref)
     phi = attitude.misalignment(res.C_bn_final, tr.truth([tr.duration]).C_bn[0])
-    sigma = res.extra["sigma_phi"][:, -1]
+    sigma = res.sigma_phi[:, -1]
     ratio = np.sqrt(np.mean((phi / sigma) ** 2, axis=0))  # RMS of actual over predicted, per axis
     assert np.all((ratio > 0.7) & (ratio < 1.5)), ratio
 
@@ -91,7 +91,7 @@ def test_kf_and_gtsam_agree_on_the_same_recording_within_their_predicted_sigma()
     kf = KalmanAligner(imu=spec, vref_sigma=0.01).align(data, site)
     fg = FactorGraphAligner().align(data, site)
     diff = attitude.misalignment(kf.C_bn_final, fg.C_bn_final)
-    sigma = np.hypot(kf.extra["sigma_phi"][:, -1], fg.extra["sigma_phi_noise"][:, -1])
+    sigma = np.hypot(kf.sigma_phi[:, -1], fg.extra["sigma_phi_noise"][:, -1])
     assert np.all(np.abs(diff) < 3 * sigma), diff / sigma
 
 
@@ -109,7 +109,8 @@ def test_batched_filters_give_filterpys_estimates(method):
     b = method(imu=spec, vref_sigma=0.05, engine="filterpy").align(data, Site(LAT, 1.9, 0.0), vref=vref, init=init)
     phi = attitude.misalignment(a.C_bn, b.C_bn)
     assert np.abs(phi).max() < 1e-9 * np.pi  # attitude: 1e-9 of a half turn
-    for key in ("sigma_phi", "gyro_bias", "accel_bias"):
+    assert np.allclose(a.sigma_phi, b.sigma_phi, rtol=1e-9, atol=0.0)
+    for key in ("gyro_bias", "accel_bias"):
         assert np.allclose(a.extra[key], b.extra[key], rtol=1e-9, atol=0.0), key
 
 

@@ -180,7 +180,7 @@ class Wobble:
         phi = np.stack([self.a * np.sin(2 * np.pi * t / self.p), np.full(t.size, self.c), np.zeros(t.size)], -1)
         C = Rotation.from_rotvec(-phi).as_matrix() @ np.asarray(init)
         return AlignmentResult(self.name, t, np.broadcast_to(C, (imu.runs,) + C.shape).copy(),
-                               {"figures": {"answer": 42.0}, "series": {"s": np.ones((imu.runs, t.size))}})
+                               figures={"answer": 42.0}, series={"s": np.ones((imu.runs, t.size))})
 
 
 def test_window_rmse_amplitude_and_comparison_have_their_closed_forms(tmp_path):
@@ -234,14 +234,13 @@ class WholeRecordCoarse:
     name = "whole-record-coarse"
     description = "coarse alignment of the whole record at every time (not causal)"
     min_duration_s = 1.0
-    causal = False
 
     def align(self, imu, site, vref=None, init=None):
         from fusionbench.coarse import CoarseAligner
         from fusionbench.aligner import AlignmentResult
 
         res = CoarseAligner(history_points=60).align(imu, site)
-        return AlignmentResult(self.name, res.t, np.repeat(res.C_bn[:, -1:], res.t.size, axis=1))
+        return AlignmentResult(self.name, res.t, np.repeat(res.C_bn[:, -1:], res.t.size, axis=1), causal=False)
 
 
 def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(tmp_path):
