@@ -346,7 +346,7 @@ class RollingEKF:
         """The output-sensitivity curves of ``scheme`` (seed 002 Figs. 4-7) into ``folder``; [(file, caption)]."""
         from .rolling_observability import sensitivity_curves, sensitivity_figure
 
-        from fusionbench.figures import scheme_events
+        from fusionbench.calibration import scheme_events
 
         times, S = sensitivity_curves(scheme, lat, h)
         sensitivity_figure(times, S, path=Path(folder) / "sensitivity.png", events=scheme_events(scheme))

@@ -191,7 +191,7 @@ def _one_run(scn, spec, method_names, k, seed):
     truth = run.states[0]
     out = {}
     for name in method_names:
-        method = scn.calibrator(name)
+        method = scn.method(name)
         t0 = time.perf_counter()
         res = method.calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat, scn.site.h)
         wall = time.perf_counter() - t0
@@ -236,12 +236,12 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1,
     ``progress``: a bar over runs (:func:`fusionbench.progress.bar`: None shows one on a terminal)."""
     methods = list(methods or scn.methods)
     for m in methods:
-        scn.calibrator(m)
+        scn.method(m)
     duration, default_runs = scn.sized(quick)
     runs = default_runs if runs is None else int(runs)
     if runs < 1:
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
-    spec = scn.platform.scaled(duration)
+    spec = scn.setup["platform"].scaled(duration)
     if n_jobs == 1 or runs == 1:
         done = (_one_run(scn, spec, methods, k, seed) for k in range(runs))
     else:  # in run order whatever the worker that finished first
@@ -322,3 +322,71 @@ def _metrics(scn, spec, outcomes, t, runs, seed, quick, duration):
             if key in oc["figures"] and key not in out:
                 out[key] = oc["figures"][key]
     return out
+
+
+def _platform_table(d, src, duration):
+    """The scenario's ``[platform]`` table (:func:`parse_platform`), its scheme as long as ``duration_s``."""
+    spec = parse_platform(d, src)
+    total = sum(sg.duration for sg in spec.scheme.segments)
+    if abs(total - duration) > 1e-6:
+        raise ValueError(f"{src}: field 'duration_s': expected the scheme's length {total:g} s, found {duration:g}")
+    return spec
+
+
+class PlatformRolling:
+    """Seed 002's platform self-calibration (``experiment = "platform-rolling"``) as an
+    :class:`fusionbench.experiment.Experiment`: a ``[platform]`` table, methods from ``fusionbench.calibrators``."""
+
+    name = "platform-rolling"
+    kind = "calibration"
+    method_group = GROUP
+    #: Its own top-level table of the scenario file and the parser of it (the scenario's ``setup["platform"]``).
+    tables = {"platform": _platform_table}
+
+    def load(self, data, src):
+        from . import scenarios
+
+        return scenarios.parse(data, src, tables=self.tables)
+
+    def load_method(self, scn, spec, **options):
+        return load_calibrator(spec, **options)
+
+    def run(self, scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, refusals=False):
+        return run_calibration(scn, methods, runs, seed, quick, n_jobs, progress)
+
+    def write_report(self, out, folder):
+        from .calibration_report import write_report
+
+        return write_report(out, folder)
+
+    def events(self, scn, duration_s):
+        """The roll phases of the scheme (scaled to ``duration_s``) as unshaded spans."""
+        return scheme_events(scn.setup["platform"].scaled(duration_s).scheme)
+
+    def check(self, new, ref):
+        """A coefficient group's largest |mean error| may not grow beyond 10 % of the reference (customary units)."""
+        from .check import REL_TOL
+
+        bad = []
+        for name, r in ref.get("methods", {}).items():
+            n = new.get("methods", {}).get(name, {})
+            for g, rg in r.get("groups", {}).items():
+                rv = rg["max_abs_error_mean"]
+                nv = n.get("groups", {}).get(g, {}).get("max_abs_error_mean", float("nan"))
+                if not nv <= rv * (1 + REL_TOL):
+                    bad.append((name, f"{g} max |mean error| ({rg.get('unit', '')})", rv, nv, rv * (1 + REL_TOL)))
+        return bad
+
+
+def scheme_events(scheme):
+    """The roll phases of a platform's rolling scheme (:class:`fusionbench.platform.Scheme`) as unshaded spans
+    (:class:`fusionbench.figures.Event`)."""
+    from .figures import Event
+
+    names = {v: k for k, v in _AXES.items()}
+    ev, t = [], 0.0
+    for seg in scheme.segments:
+        ev.append(Event(t, t + seg.duration, f"roll about {names.get(tuple(seg.axis), str(tuple(seg.axis)))}",
+                        shade=False))
+        t += seg.duration
+    return ev

@@ -61,11 +61,16 @@ def _cmd_list(args):
     for name, ep in sorted(available_methods().items()):
         cls = ep.load()
         print(f"  {name:<28} {getattr(cls, 'description', '')}{_method_notes(cls)}")
-    from .calibration import available_calibrators
+    from importlib.metadata import entry_points
 
-    print("calibration methods (platform experiments):")
-    for name, ep in sorted(available_calibrators().items()):
-        print(f"  {name:<28} {getattr(ep.load(), 'description', '')}")
+    from .aligner import GROUP
+    from .experiment import all_experiments
+
+    for exp_name, exp in all_experiments().items():  # methods of another kind, from the experiment that runs them
+        if exp.method_group != GROUP:
+            print(f"methods of the {exp_name} experiment:")
+            for ep in sorted(entry_points(group=exp.method_group), key=lambda e: e.name):
+                print(f"  {ep.name:<28} {getattr(ep.load(), 'description', '')}")
     return 0
 
 
@@ -115,8 +120,8 @@ def _cmd_align(args):
 
 def _cmd_run(args):
     from .overview import write_overview, write_page
-    from .report import write_scenario_report
-    from .runner import run_scenario
+    from .experiment import write_scenario_report
+    from .experiment import run_scenario
 
     names = scenarios.builtin_names() if args.scenario == "all" else [args.scenario]
     scns = [scenarios.get(n) for n in names]  # validate every scenario before running any

@@ -5,7 +5,7 @@ A condition is a base (static, a mild sway, seed 000's Table-1 sway, or a vehicl
 its heading with a velocity reference), a latitude, a true heading, an IMU preset and the noise of the velocity
 reference. The matrix file lists about twenty of them so that every level of every factor appears, not the full
 product. Each condition becomes an ordinary alignment scenario (:func:`condition_scenario`) run by
-:func:`fusionbench.runner.run_scenario`: the methods start on their own (no initial guess), get the reference
+:func:`fusionbench.runner.run_alignment`: the methods start on their own (no initial guess), get the reference
 only where the base moves or the reference is noisy, and get the condition's IMU as their model; a method runs
 only on the conditions its ``supports`` claims (:class:`fusionbench.aligner.Supports`).
 
@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from joblib import Parallel, delayed
 
-from . import fields, imu, metrics, units
+from . import aligner, fields, imu, metrics, units
 from .aligner import available_methods, azimuth_bias_ratio, supports
 from .progress import bar as progress_bar
 
@@ -214,7 +214,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     ``methods`` defaults to the file's list, else every registered aligner; ``runs`` to the file's size.
     Same seed, same numbers whatever ``n_jobs``.
     """
-    from .runner import run_scenario
+    from .runner import run_alignment
 
     names = list(methods or matrix.methods or aligner_names())
     duration, default_runs = matrix.sized(quick)
@@ -243,7 +243,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
             todo.append((cond, scn, claimed, bound))
     # one condition per worker, all its runs in one batch (the batched filters vectorize over runs); the same
     # numbers as any other split, since run k of a seed does not depend on the batching
-    run = delayed(run_scenario)
+    run = delayed(run_alignment)
     jobs = (run(scn, methods=claimed, runs=runs, seed=seed, quick=quick, n_jobs=1, progress=False, refusals=True)
             for _, scn, claimed, _ in todo)
     pbar = progress_bar(progress, runs * len(todo), matrix.name)
@@ -308,3 +308,45 @@ def _metrics(matrix, names, conditions, cells, outputs, runs, seed, quick, durat
             "reference_condition": matrix.conditions[0].name,
             "conditions": conditions, "cells": cells,
             "scoreboard": {"passed": passed, "total": total, "methods": board}}
+
+
+class ConformanceExperiment:
+    """The conformance matrix (``experiment = "conformance"``) as an :class:`fusionbench.experiment.Experiment`:
+    its file is a :class:`Matrix` (:func:`parse`), its methods the registered aligners."""
+
+    name = "conformance"
+    kind = "conformance"
+    method_group = aligner.GROUP
+
+    def load(self, data, src):
+        return parse(data, src)
+
+    def load_method(self, scn, spec, **options):
+        return aligner.load_method(spec, **options)
+
+    def run(self, scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, refusals=True):
+        return run_matrix(scn, methods, runs, seed, quick, n_jobs, progress)
+
+    def write_report(self, out, folder):
+        from .conformance_report import write_report
+
+        return write_report(out, folder)
+
+    def check(self, new, ref):
+        """Every cell that passed in the reference must pass, and its azimuth efficiency may not grow beyond
+        10 % of the reference plus 0.05."""
+        from .check import ABS_TOL_EFFICIENCY, REL_TOL
+
+        bad = []
+        for name, rc in ref.get("cells", {}).items():
+            for cond, r in rc.items():
+                n = new.get("cells", {}).get(name, {}).get(cond, {"status": "missing"})
+                if r["status"] == "pass" and n["status"] != "pass":
+                    bad.append((name, f"{cond}: cell", "pass", n["status"], "pass"))
+                if "efficiency_U" in r:
+                    allowed = r["efficiency_U"] * (1 + REL_TOL) + ABS_TOL_EFFICIENCY
+                    nv = n.get("efficiency_U", float("nan"))
+                    if not nv <= allowed:
+                        bad.append((name, f"{cond}: efficiency", r["efficiency_U"], nv, allowed))
+        return bad
+

@@ -28,6 +28,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .experiment import load_experiment  # noqa: E402
+
 #: Records longer than this are drawn against hours, s.
 HOURS_FROM_S = 2 * 3600.0
 #: Most methods drawn in one panel; more are spread over panels side by side.
@@ -248,7 +250,8 @@ class Event:
 
 def scenario_events(scn, duration_s):
     """Events of a scenario: noise schedules of the IMU and of the velocity reference, the jump window of
-    the metrics, the motion segments (a manoeuvre) and the segments of a platform's rolling scheme."""
+    the metrics, the motion segments (a manoeuvre) and the experiment's own (its optional
+    ``events(scn, duration_s)``, e.g. the segments of a platform's rolling scheme)."""
     ev = []
     for s in getattr(scn.imu_spec, "schedules", ()):
         who = "IMU" if set(s.sensors) == {"gyro", "accel"} else "+".join(s.sensors)
@@ -266,21 +269,9 @@ def scenario_events(scn, duration_s):
                 a = np.asarray(seg.accel, dtype=float)
                 ev.append(Event(t, t + seg.duration, f"manoeuvre, {np.linalg.norm(a):.3g} m/s^2"))
             t += seg.duration
-    if getattr(scn, "platform", None) is not None:
-        ev += scheme_events(scn.platform.scaled(duration_s).scheme)
-    return ev
-
-
-def scheme_events(scheme):
-    """The roll phases of a platform's rolling scheme (:class:`fusionbench.platform.Scheme`) as unshaded spans."""
-    from .calibration import _AXES
-
-    names = {v: k for k, v in _AXES.items()}
-    ev, t = [], 0.0
-    for seg in scheme.segments:
-        ev.append(Event(t, t + seg.duration, f"roll about {names.get(tuple(seg.axis), str(tuple(seg.axis)))}",
-                        shade=False))
-        t += seg.duration
+    exp = load_experiment(getattr(scn, "experiment", "alignment"))
+    if hasattr(exp, "events"):  # the experiment's own phases (e.g. a platform's roll phases)
+        ev += exp.events(scn, duration_s)
     return ev
 
 

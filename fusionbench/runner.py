@@ -236,9 +236,10 @@ def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end, f
     return result, ~first_out
 
 
-def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None,
-                 refusals=False):
-    """Run a scenario's Monte Carlo and compute its metrics.
+def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None,
+                  refusals=False):
+    """Run an alignment scenario's Monte Carlo and compute its metrics (the ``alignment`` experiment;
+    :func:`fusionbench.experiment.run_scenario` runs any scenario).
 
     Parameters
     ----------
@@ -265,16 +266,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     Returns
     -------
     RunOutput
-        Or :class:`fusionbench.calibration.CalibrationOutput` for a platform-rolling scenario.
     """
-    if scn.experiment == "conformance":
-        from .conformance import run_matrix
-
-        return run_matrix(scn, methods, runs, seed, quick, n_jobs, progress)
-    if scn.experiment == "platform-rolling":
-        from .calibration import run_calibration
-
-        return run_calibration(scn, methods, runs, seed, quick, n_jobs, progress=progress)
     methods = list(methods or scn.methods)
     for m in methods:  # fail early, with the method's own message
         scn.method(m)

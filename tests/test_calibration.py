@@ -9,8 +9,8 @@ from fusionbench import platform as pf
 from fusionbench import scenarios
 from fusionbench.calibration import draw_truth
 from fusionbench.check import compare
-from fusionbench.report import write_scenario_report
-from fusionbench.runner import run_scenario
+from fusionbench.experiment import write_scenario_report
+from fusionbench.experiment import run_scenario
 
 TOML = """
 name = "tiny-rolling"
@@ -39,16 +39,16 @@ def _load(tmp_path, text=TOML):
 def test_paper_scenario_loads_with_the_papers_scheme():
     scn = scenarios.get("paper002-rolling")
     assert scn.experiment == "platform-rolling"
-    segs = scn.platform.scheme.segments
+    segs = scn.setup["platform"].scheme.segments
     assert [s.duration for s in segs] == [1800.0, 900.0, 1800.0, 900.0]
     assert segs[0].axis == (0.0, -1.0, 0.0) and segs[1].axis == (1.0, 0.0, 0.0)
     assert segs[0].rate == pytest.approx(np.radians(0.1))
-    quick = scn.platform.scaled(900.0)
+    quick = scn.setup["platform"].scaled(900.0)
     assert sum(s.duration for s in quick.scheme.segments) == pytest.approx(900.0)
 
 
 def test_truth_depends_on_seed_and_run_only(tmp_path):
-    spec = _load(tmp_path).platform
+    spec = _load(tmp_path).setup["platform"]
     c0, a0 = draw_truth(spec, 5, 1)
     c1, a1 = draw_truth(spec, 5, 1)
     assert np.array_equal(c0, c1) and np.array_equal(a0, a1)

@@ -11,7 +11,7 @@ from fusionbench.aligner import MAX_BIAS_TO_EARTH_RATE, Supports, azimuth_bias_r
 from fusionbench.check import compare
 from fusionbench.fields import FieldError
 from fusionbench.imu import PRESETS
-from fusionbench.runner import run_scenario
+from fusionbench.experiment import run_scenario
 
 OFFSET = "tests.test_conformance:OffsetCoarse"
 
@@ -139,7 +139,7 @@ def test_check_guards_the_cells(mini):
 
 
 def test_report_has_the_scoreboard(mini, tmp_path):
-    from fusionbench.report import write_scenario_report
+    from fusionbench.experiment import write_scenario_report
 
     _, out = mini
     write_scenario_report(out, tmp_path)

@@ -23,6 +23,7 @@ import pytest
 
 from fusionbench import aligner, calibration, conformance, imu, scenarios, units
 from fusionbench import platform as pf
+from fusionbench.experiment import available_experiments, load_experiment
 
 ROOT = Path(__file__).parents[1]
 DOC_PATH = ROOT / "docs" / "scenarios.md"
@@ -96,7 +97,7 @@ def parser_keys():
     (the inline key sets: a segment's, a schedule's, a scheme segment's, the conformance sub-tables')."""
     keys = (set(scenarios._TOP) | set().union(*scenarios._SECTIONS.values()) | set(imu.SPEC_KEYS)
             | set(conformance._TOP) | set(conformance._CONDITION_KEYS) | set(calibration.PLATFORM_KEYS)
-            | set(calibration._GROUP_KEYS) | {"method"})  # a [variants.NAME] table's own key (the rest are options)
+            | set(calibration._GROUP_KEYS) | set(calibration.PlatformRolling.tables) | {"method"})  # a [variants.NAME] table's own key (the rest are options)
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
             if isinstance(node, ast.Set):
@@ -106,7 +107,7 @@ def parser_keys():
 
 def parser_values():
     """The names a parser accepts as values: kinds, experiments, presets, bases, axes, and inline ``choices``."""
-    values = (set(scenarios.KINDS) | set(scenarios.EXPERIMENTS) | set(imu.PRESETS) | set(conformance.BASES)
+    values = (set(scenarios.KINDS) | set(available_experiments()) | set(imu.PRESETS) | set(conformance.BASES)
               | set(calibration._AXES) | set(imu._SENSORS))
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
@@ -349,7 +350,7 @@ def test_example_loads_as_the_page_says(tmp_path, name):
             scn.method(m)
     elif scn.experiment == "platform-rolling":
         for m in scn.methods:
-            scn.calibrator(m)
+            scn.method(m)
 
 
 def test_minimal_example_is_what_the_page_says(tmp_path):
@@ -372,8 +373,8 @@ def test_noise_jump_example_is_what_the_page_says(tmp_path):
 
 def test_platform_example_is_what_the_page_says(tmp_path):
     scn = _load(tmp_path, "my-rolling")
-    assert sum(s.duration for s in scn.platform.scheme.segments) == scn.duration_s
-    quick = scn.platform.scaled(scn.sized(True)[0])
+    assert sum(s.duration for s in scn.setup["platform"].scheme.segments) == scn.duration_s
+    quick = scn.setup["platform"].scaled(scn.sized(True)[0])
     assert sum(s.duration for s in quick.scheme.segments) == 600.0
     assert quick.readout_s == 60.0  # capped at a tenth of the quick duration
 
@@ -464,7 +465,7 @@ def test_every_key_of_the_builtin_scenarios_is_documented():
 
 def test_builtin_variant_options_are_constructor_options():
     for name, data in _builtins().items():
-        group = calibration.GROUP if data.get("experiment") == "platform-rolling" else aligner.GROUP
+        group = load_experiment(data.get("experiment", "alignment")).method_group
         for vname, opts in data.get("variants", {}).items():
             cls = aligner.entry_class(group, opts["method"], "method")
             params = inspect.signature(cls).parameters

@@ -53,6 +53,7 @@ def test_is_an_aligner_with_keyframes_ending_at_the_last_sample(noise_free_180):
     assert res.method == "gtsam" and res.t[0] == pytest.approx(0.0) and res.t_end == data.t[-1]
     assert np.diff(res.t) == pytest.approx(np.ones(300))  # 1 s keyframes
     assert res.C_bn.shape == (1, 301, 3, 3) and res.sigma_phi.shape == (1, 301, 3)
+    assert res.causal is False  # a smoother: its settling is measured on prefixes
     assert list(keyframe_counts(1049, 100)) == list(range(0, 1000, 100)) + [1049]  # short tail merged
     assert list(keyframe_counts(1050, 100)) == list(range(0, 1100, 100)) + [1050]
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, V, X
 
-from baselines.factor_graph import (AdaptiveFactorGraphAligner, FactorGraphAligner, RobustFactorGraphAligner,
+from baselines.factor_graph import (AdaptiveFactorGraphAligner, FactorGraphAligner,
                                     noise_model)
 from baselines.graph_support import Posterior, tile_means, tile_sums, tiles, velocity_error, velocity_factor
 from baselines.kalman import KalmanAligner

@@ -17,8 +17,8 @@ import pytest
 
 from fusionbench import provenance, scenarios
 from fusionbench.overview import GOOD_FACTOR, _flag_diverged, grade, headline, write_overview, write_page
-from fusionbench.report import write_scenario_report
-from fusionbench.runner import run_scenario
+from fusionbench.experiment import write_scenario_report
+from fusionbench.experiment import run_scenario
 
 TINY = Path(__file__).parent / "data" / "tiny-jump.toml"  # static, reference noise x100 from 40 to 60 s
 

@@ -105,8 +105,8 @@ def test_noise_free_paper_run_recovers_every_coefficient_within_one_percent():
     from fusionbench.calibration import draw_truth
 
     scn = scenarios.get("paper002-rolling")
-    c, a = draw_truth(scn.platform, 0, 0)
-    run = pf.simulate(scn.platform.scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    c, a = draw_truth(scn.setup["platform"], 0, 0)
+    run = pf.simulate(scn.setup["platform"].scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(passes=2).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     est = res.final()
     assert np.all(np.abs(est[:pf.N_COEFFS] - c) < 0.01 * np.abs(c))
@@ -165,7 +165,7 @@ def test_second_pass_reaches_the_information_bound():
     from baselines.rolling_observability import information_matrix
 
     scn = scenarios.get("paper002-rolling")
-    spec = scn.platform.scaled(1800.0)
+    spec = scn.setup["platform"].scaled(1800.0)
     c, a = draw_truth(spec, 0, 0)
     run = pf.simulate(spec.scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(gyro_noise=0.0).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
@@ -188,9 +188,9 @@ def test_auto_passes_iterate_until_the_linearisation_point_is_the_answer():
     from fusionbench.calibration import draw_truth
 
     scn = scenarios.get("paper002-rolling")
-    c, a = draw_truth(scn.platform, 0, 2)
+    c, a = draw_truth(scn.setup["platform"], 0, 2)
     a[1] = np.radians(10.0)
-    run = pf.simulate(scn.platform.scheme, c, pf.angles_to_dcm(a), scn.site.lat, seed=12)
+    run = pf.simulate(scn.setup["platform"].scheme, c, pf.angles_to_dcm(a), scn.site.lat, seed=12)
     two = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     auto = R.RollingEKF(passes="auto").calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     z = lambda res: np.max(np.abs(res.final()[:pf.N_COEFFS] - c) / res.sigma[-1, :pf.N_COEFFS])  # noqa: E731

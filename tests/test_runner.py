@@ -7,8 +7,8 @@ import pytest
 
 from fusionbench import scenarios
 from fusionbench.check import compare
-from fusionbench.report import write_scenario_report
-from fusionbench.runner import run_scenario
+from fusionbench.experiment import write_scenario_report
+from fusionbench.experiment import run_scenario
 
 TOML = """
 name = "tiny"

@@ -23,20 +23,17 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass, field
-from functools import partial
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from .. import attitude, fields, imu, trajectory
-from ..aligner import Site, load_method
+from ..aligner import Site
+from ..experiment import load_experiment
 
 _TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
-        "motion", "imu", "vref", "init", "metrics", "variants", "paper", "experiment", "platform"}
-#: Experiment kinds: alignment (the default: IMU data to aligners) and the platform self-calibration of
-#: seed 002 (a ``[platform]`` table, methods from the ``fusionbench.calibrators`` group).
-EXPERIMENTS = ("alignment", "platform-rolling", "conformance")
+        "motion", "imu", "vref", "init", "metrics", "variants", "paper", "experiment"}
 #: What a scenario is about, which decides what its figures draw and which figure the overview scores:
 #: ``alignment`` (a stationary or swaying base: the theoretical limits and the settling band apply);
 #: ``moving-alignment`` (a vehicle under way with a velocity reference: the stationary limits do not apply,
@@ -95,7 +92,7 @@ class Scenario:
     amplitude_windows_s: dict = field(default_factory=dict)
     compare: tuple | None = None
     experiment: str = "alignment"
-    platform: object = None
+    setup: dict = field(default_factory=dict)
     source: str = ""
     kind: str = "alignment"
     raw: dict = field(default_factory=dict, compare=False, repr=False)
@@ -121,32 +118,17 @@ class Scenario:
         C_n_nprime = attitude.euler_platform_to_dcm(np.radians(self.init_misalignment))
         return C_n_nprime @ C_bn_true
 
-    def calibrator(self, name):
-        """Instantiate a calibration method (platform experiments) by variant name, registered name or path."""
-        from ..calibration import load_calibrator
-
-        if name in self.variants:
-            options = dict(self.variants[name])
-            return self._variant(name, load_calibrator, options.pop("method"), options)
-        return load_calibrator(name)
-
     def method(self, name):
-        """Instantiate a method by scenario variant name, registered name or ``module:Class`` path.
-
-        A method that uses an IMU noise model gets the scenario's IMU spec (the true model), and one with a
-        ``vref_sigma`` option the noise of the scenario's velocity reference (m/s per sample, the largest axis),
-        unless the variant sets them."""
-        given = {"imu": self.imu_spec, "vref_sigma": float(max(self.vref_spec.sigma))}
-        if name in self.variants:
-            options = dict(self.variants[name])
-            return self._variant(name, partial(load_method, **given), options.pop("method"), options)
-        return load_method(name, **given)
-
-    def _variant(self, name, loader, spec, options):
-        """A variant's method; an option its class refuses is reported against the scenario's table."""
+        """Instantiate a method by scenario variant name, registered name or ``module:Class`` path, through the
+        scenario's experiment (:meth:`fusionbench.experiment.Experiment.load_method`: an aligner gets the
+        scenario's IMU spec and velocity-reference noise when it takes them, unless the variant sets them)."""
+        exp = load_experiment(self.experiment)
+        if name not in self.variants:
+            return exp.load_method(self, name)
+        options = dict(self.variants[name])
         try:
-            return loader(spec, **options)
-        except (TypeError, ValueError) as exc:
+            return exp.load_method(self, options.pop("method"), **options)
+        except (TypeError, ValueError) as exc:  # an option its class refuses: reported against the scenario's table
             raise ScenarioError(f"{_where(self.source, 'variants.' + name)}: {exc}") from None
 
 
@@ -190,9 +172,13 @@ def _window_metrics(m, src, duration, methods):
     return win, amp, compare
 
 
-def parse(data: dict, src: str = "<scenario>") -> Scenario:
-    """Validate a scenario mapping (as read from TOML) and build a :class:`Scenario`."""
-    unknown = set(data) - _TOP
+def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
+    """Validate a scenario mapping (as read from TOML) and build a :class:`Scenario`.
+
+    ``tables`` are an experiment's own required top-level tables, ``{name: parser(table, src, duration_s)}``;
+    what each parser returns is the scenario's ``setup[name]``."""
+    tables = tables or {}
+    unknown = set(data) - _TOP - set(tables)
     if unknown:
         raise ScenarioError(f"{_where(src, sorted(unknown)[0])}: unknown (expected one of {sorted(_TOP)})")
     for sec, keys in _SECTIONS.items():
@@ -262,37 +248,38 @@ def parse(data: dict, src: str = "<scenario>") -> Scenario:
             raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
     paper = data.get("paper", {})
     experiment = data.get("experiment", "alignment")
-    if experiment not in EXPERIMENTS:
-        raise ScenarioError(f"{_where(src, 'experiment')}: expected one of {EXPERIMENTS}, found {experiment!r}")
-    plat = None
-    if experiment == "platform-rolling":
-        from ..calibration import parse_platform
-
-        if not isinstance(data.get("platform"), dict):
-            raise ScenarioError(f"{_where(src, 'platform')}: expected a [platform] table, found {data.get('platform')!r}")
+    exp = _experiment(experiment, src)
+    setup = {}
+    for key, parser in tables.items():
+        if not isinstance(data.get(key), dict):
+            raise ScenarioError(f"{_where(src, key)}: expected a [{key}] table, found {data.get(key)!r}")
         try:
-            plat = parse_platform(data["platform"], src)
+            setup[key] = parser(data[key], src, duration)
         except ValueError as exc:
-            raise ScenarioError(str(exc)) from None
-        total = sum(sg.duration for sg in plat.scheme.segments)
-        if abs(total - duration) > 1e-6:
-            raise ScenarioError(f"{_where(src, 'duration_s')}: expected the scheme's length {total:g} s, found {duration:g}")
-    kind = _kind(data, src, experiment, win is not None, bool(segs))
+            raise ScenarioError(str(exc).splitlines()[0]) from None
+    kind = _kind(data, src, exp.kind, win is not None, bool(segs))
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
                     site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, win,
-                    amp_windows, compare, experiment, plat, src, kind, data)
+                    amp_windows, compare, experiment, setup, src, kind, data)
 
 
-def _kind(data, src, experiment, has_rmse_window, moves):
-    """The scenario's ``kind`` (:data:`KINDS`): as given, else inferred (see KINDS)."""
+def _experiment(name, src):
+    """The registered experiment ``name`` (:mod:`fusionbench.experiment`); a ScenarioError naming the field."""
+    try:
+        return load_experiment(name, _where(src, "experiment"))
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+
+
+def _kind(data, src, given, has_rmse_window, moves):
+    """The scenario's ``kind`` (:data:`KINDS`): as the file gives it, else the experiment's (``given``), else
+    inferred (see KINDS)."""
     if "kind" in data:
         if data["kind"] not in KINDS:
             raise ScenarioError(f"{_where(src, 'kind')}: expected one of {KINDS}, found {data['kind']!r}")
         return data["kind"]
-    if experiment == "platform-rolling":
-        return "calibration"
-    if experiment == "conformance":
-        return "conformance"
+    if given is not None:
+        return given
     return "navigation" if has_rmse_window else "moving-alignment" if moves else "alignment"
 
 
@@ -310,12 +297,8 @@ def load(path) -> Scenario:
 
 
 def _parse_any(data, src):
-    """A scenario, or a conformance matrix (``experiment = "conformance"``: :mod:`fusionbench.conformance`)."""
-    if data.get("experiment") == "conformance":
-        from .. import conformance
-
-        return conformance.parse(data, src)
-    return parse(data, src)
+    """The scenario object of the file's experiment (``experiment``, default ``alignment``): its ``load``."""
+    return _experiment(data.get("experiment", "alignment"), src).load(data, src)
 
 
 def builtin_names():

@@ -1,0 +1,43 @@
+"""The alignment experiment (``experiment = "alignment"``, the default): every aligner on identical simulated IMU
+data, errors against truth and the theoretical limits (:mod:`fusionbench.runner`, :mod:`fusionbench.report`).
+
+Its scenarios are the files of :mod:`fusionbench.scenarios`; its methods the ``fusionbench.methods`` group. A
+free-inertial navigation scenario (kind ``navigation``: a :class:`fusionbench.aligner.Navigator` started from a
+given attitude) runs through the same Monte Carlo.
+"""
+
+from __future__ import annotations
+
+from . import aligner, scenarios
+from .aligner import GROUP
+
+
+class AlignmentExperiment:
+    """The alignment Monte Carlo as an :class:`fusionbench.experiment.Experiment`."""
+
+    name = "alignment"
+    kind = None  # inferred from the scenario: alignment, moving-alignment or navigation
+    method_group = GROUP
+
+    def load(self, data, src):
+        return scenarios.parse(data, src)
+
+    def load_method(self, scn, spec, **options):
+        """A method with the scenario's IMU spec (the true model) and velocity-reference noise (the largest axis,
+        m/s per sample) offered to a method that takes them (:func:`fusionbench.aligner.load_method`)."""
+        given = {"imu": scn.imu_spec, "vref_sigma": float(max(scn.vref_spec.sigma))}
+        return aligner.load_method(spec, **{**given, **options})  # a variant's own imu / vref_sigma win
+
+    def run(self, scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, refusals=False,
+            batch_size=None):
+        from .runner import run_alignment
+
+        return run_alignment(scn, methods, runs, seed, quick, n_jobs, progress, batch_size, refusals)
+
+    def write_report(self, out, folder):
+        from .report import write_alignment_report
+
+        return write_alignment_report(out, folder)
+
+    def check(self, new, ref):
+        return []  # the common rules of fusionbench.check and the metric features' rules cover its figures
