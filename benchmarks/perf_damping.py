@@ -48,7 +48,7 @@ def navigate(scn, scheme, runs, seed, duration):
     t0 = time.perf_counter()
     res = nav.navigate(_stream(scn, traj, runs, seed, duration), scn.site, init, dt=scn.dt, runs=runs)
     wall = time.perf_counter() - t0
-    a, b = scn.rmse_window_s
+    a, b = scn.feature("windows").rmse_window_s
     sel = (res.t >= a) & (res.t <= b)
     phi = metrics.misalignment_history(res.C_bn[:, sel], traj.truth(res.t[sel]).C_bn)
     return wall, float(np.sqrt(np.mean(np.sum(phi[..., :2] ** 2, axis=-1))) / units.ARCMIN)
@@ -71,7 +71,7 @@ def main():
     out = {"runs": args.runs, "duration_s": duration, "map_fit_s": round(fit_s, 2), "navigations": {}}
     for name in SCENARIOS:
         scn = scenarios.get(name)
-        if scn.rmse_window_s[1] > duration:
+        if scn.feature("windows").rmse_window_s[1] > duration:
             print(f"{name:<22} skipped: its window ends after {duration / 3600:g} h")
             continue
         for scheme in SCHEMES:

@@ -363,6 +363,24 @@ class PlatformRolling:
         """The roll phases of the scheme (scaled to ``duration_s``) as unshaded spans."""
         return scheme_events(scn.setup["platform"].scaled(duration_s).scheme)
 
+    def headline(self, metrics):
+        """The overview's column (:class:`fusionbench.overview.Column`): the coefficient groups within the paper's
+        claim and the worst |mean error| over its claim (good within 1)."""
+        from .overview import Column
+
+        col = Column(metrics["scenario"], "calibration", "coefficient groups within the paper's claim; worst |mean "
+                     "error| / claim", short="within claim; worst / claim", claim=True)
+        for meth, r in metrics["methods"].items():
+            ratios = {g: v["max_abs_error_mean"] / v["paper_below"] for g, v in r.get("groups", {}).items()
+                      if v.get("paper_below")}
+            if not ratios:
+                col.values[meth] = (None, "no claim")
+                continue
+            worst = max(ratios, key=ratios.get)
+            within = sum(v <= 1.0 for v in ratios.values())
+            col.values[meth] = (ratios[worst], f"{within}/{len(ratios)}; {ratios[worst]:.3g} ({worst})")
+        return col
+
     def check(self, new, ref):
         """A coefficient group's largest |mean error| may not grow beyond 10 % of the reference (customary units)."""
         from .check import REL_TOL

@@ -10,7 +10,7 @@ from . import platform as pf
 from . import units
 from .figures import plt, save_png
 from .imufiles import atomic_open
-from .report import _paper_section
+from .report import paper_section
 from .runner import write_metrics
 
 
@@ -133,7 +133,7 @@ information bound in the group and the paper's claims (seed 002, 500 runs):
 ![coefficient estimates, run 0](coefficients.png)
 
 {figs}
-{_paper_section(out)}
+{paper_section(out)}
 Every coefficient (error mean and standard deviation over runs, the filter's mean predicted sigma, and the
 information bound of the outputs, mean over runs: the sigma an efficient estimator would reach):
 

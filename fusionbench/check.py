@@ -6,15 +6,14 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
 * azimuth settling time (against the truth: the limit's band), mean: new > ref * (1 + REL_TOL)
   + max(ABS_TOL_S, std / N);
 * the fraction of runs that end inside that band (``settled_fraction_U``): new < ref - ABS_TOL_FRACTION;
-* level RMSE in the scenario's window (``window_rmse_arcmin``), where the reference has it: as the final error;
-* ``reduction_percent`` of a scenario comparing two methods: new < ref - ABS_TOL_PERCENT;
-* platform calibration (``groups`` in the reference): a group's largest |mean error| new > ref * (1 + REL_TOL)
-  (customary units). The information rank is not guarded: on a short scheme the singular values decay
-  through the rank tolerance without a gap (``--quick`` of paper002-rolling: the 32nd sits at 1e-12.0),
-  so the count is not a stable figure there;
-* a conformance matrix (``cells`` in the reference): a cell that passed must pass, and its azimuth efficiency
-  must not grow beyond ref * (1 + REL_TOL) + ABS_TOL_EFFICIENCY;
-* a method of the reference missing from the run.
+* a method of the reference missing from the run;
+* and the rules of every registered experiment and metric feature for the figures they add
+  (:meth:`fusionbench.experiment.Experiment.check`, :meth:`fusionbench.features.Feature.check`): the level RMSE
+  in a window as the final error (``window_rmse_arcmin``); a comparison's ``reduction_percent``: new < ref -
+  ABS_TOL_PERCENT; a conformance matrix's cells: a cell that passed must pass, its azimuth efficiency not beyond
+  ref * (1 + REL_TOL) + ABS_TOL_EFFICIENCY; a platform calibration's coefficient groups: the largest |mean error|
+  not beyond ref * (1 + REL_TOL) (the information rank is not guarded: on a short scheme the singular values
+  decay through the rank tolerance without a gap, so the count is not a stable figure there).
 
 Where the tolerance comes from: the same scenario, seed and size give identical numbers on one machine, so
 the Monte Carlo sampling noise cancels between a run and its reference. What remains across platforms and
@@ -35,7 +34,7 @@ import json
 from importlib import resources
 from pathlib import Path
 
-from .experiment import all_experiments
+from . import experiment, features
 
 REL_TOL = 0.10
 ABS_TOL_ARCMIN = 0.05
@@ -80,18 +79,10 @@ def compare(new: dict, ref: dict):
             rv, nv = r["settled_fraction_U"], n.get("settled_fraction_U", float("nan"))
             if not nv >= rv - ABS_TOL_FRACTION:
                 bad.append((name, "runs settled in the band", rv, nv, rv - ABS_TOL_FRACTION))
-        if "window_rmse_arcmin" in r:
-            rv = r["window_rmse_arcmin"]["level"]
-            nv = n.get("window_rmse_arcmin", {}).get("level", float("nan"))
-            allowed = rv * (1 + REL_TOL) + ABS_TOL_ARCMIN
-            if not nv <= allowed:
-                bad.append((name, "window level RMSE (arcmin)", rv, nv, allowed))
-    if "reduction_percent" in ref:
-        rv, nv = ref["reduction_percent"], new.get("reduction_percent", float("nan"))
-        if not nv >= rv - ABS_TOL_PERCENT:
-            bad.append(("-", "reduction (%)", rv, nv, rv - ABS_TOL_PERCENT))
-    for exp in all_experiments().values():  # the figures each experiment adds (it finds none in another's metrics)
+    for exp in experiment.all_experiments().values():  # the figures each experiment adds (it finds none in another's metrics)
         bad += exp.check(new, ref)
+    for feature in features.feature_classes():  # and each metric feature
+        bad += feature.check(new, ref)
     return bad
 
 

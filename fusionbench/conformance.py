@@ -270,13 +270,13 @@ def _cell(matrix, cond, name, out, bound):
         ok = cond.expect == "refuse"
         return {"status": "pass" if ok else "fail", "refused": True, "message": out.refused[name]}
     oc = out.outcomes[name]
-    err = oc.extra["phi_end"] - out.limits  # (R, 3) rad: final error minus limit
+    err = oc.per_run["phi_end"] - out.limits  # (R, 3) rad: final error minus limit
     rms = np.sqrt(np.mean(err**2, axis=0)) / units.ARCMIN
     eff = float(rms[2] * units.ARCMIN / bound[2])
     cell = {"refused": False, "efficiency_U": eff, "efficiency_max": matrix.threshold(name),
             "final_minus_limit_rms_arcmin": _axes(rms), "bound_arcmin": _axes(bound / units.ARCMIN),
-            "settling_mean_s": float(np.nanmean(oc.extra["settle"])),
-            "settled_fraction": float(np.mean(oc.extra["settled"])), "wall_s": float(oc.wall_s)}
+            "settling_mean_s": float(np.nanmean(oc.per_run["settle"])),
+            "settled_fraction": float(np.mean(oc.per_run["settled"])), "wall_s": float(oc.wall_s)}
     if cond.expect == "refuse":
         cell.update(status="fail", message="gave a heading where the azimuth is unobservable")
         return cell
@@ -331,6 +331,23 @@ class ConformanceExperiment:
         from .conformance_report import write_report
 
         return write_report(out, folder)
+
+    def headline(self, metrics):
+        """The overview's column (:class:`fusionbench.overview.Column`): claimed cells passed and the worst azimuth
+        efficiency; a method's number is its failed cells plus its worst efficiency over its threshold (good
+        within 1: every claimed cell passed)."""
+        from .overview import Column
+
+        col = Column(metrics["scenario"], "conformance", "cells passed of claimed; worst azimuth efficiency (1 optimal)",
+                     short="passed; worst eff.", claim=True, strict=True)
+        for meth, cells in metrics.get("cells", {}).items():
+            claimed = [c for c in cells.values() if c.get("status") not in ("not claimed", None)]
+            passed = sum(c["status"] == "pass" for c in claimed)
+            effs = [c["efficiency_U"] / c["efficiency_max"] for c in claimed if "efficiency_U" in c]
+            worst = max((c["efficiency_U"] for c in claimed if "efficiency_U" in c), default=None)
+            text = f"{passed}/{len(claimed)}" + (f"; {worst:.2f}" if worst is not None else "")
+            col.values[meth] = (len(claimed) - passed + max(effs, default=0.0), text) if claimed else (None, "claims none")
+        return col
 
     def check(self, new, ref):
         """Every cell that passed in the reference must pass, and its azimuth efficiency may not grow beyond

@@ -258,9 +258,8 @@ def scenario_events(scn, duration_s):
         ev.append(Event(s.start, s.end, f"{who} white-noise PSD x{s.factor:g}"))
     for s in getattr(scn.vref_spec, "schedules", ()):
         ev.append(Event(s.start, s.end, f"reference-velocity noise variance x{s.factor:g}"))
-    jump = getattr(scn, "jump_window_s", None)
-    if jump is not None and not any(e.t0_s == jump[0] and e.t1_s == jump[1] for e in ev):
-        ev.append(Event(jump[0], jump[1], "noise-jump window"))
+    for feature in getattr(scn, "features", ()):  # e.g. a jump window, unless a schedule already spans it
+        ev += [e for e in feature.events() if not any(o.t0_s == e.t0_s and o.t1_s == e.t1_s for o in ev)]
     tr = getattr(scn, "translation", None)
     if tr is not None and tr.segments:
         t = tr.start

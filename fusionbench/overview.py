@@ -15,6 +15,7 @@ from pathlib import Path
 
 import markdown
 
+from .experiment import load_experiment
 from .imufiles import atomic_open
 
 #: A cell within this factor of its column's best is drawn good, within POOR_FACTOR fair, beyond it poor.
@@ -51,6 +52,10 @@ class Column:
     higher_is_better: bool = False
     values: dict = field(default_factory=dict)
     short: str = ""
+    #: A column of claims: its numbers are ratios to a claim, a cell good within 1 (met), else fair within
+    #: POOR_FACTOR, or poor at once when ``strict``; None: cells are graded against the column's best.
+    claim: bool = False
+    strict: bool = False
 
 
 def _rms_about(stat, centre):
@@ -58,7 +63,7 @@ def _rms_about(stat, centre):
     return float((stat["std"] ** 2 + (stat["mean"] - centre) ** 2) ** 0.5)
 
 
-def headline(kind, metrics, has_init=False):
+def headline(kind, metrics, has_init=False, experiment="alignment"):
     """The scoreboard column of one scenario: the figure the scenario is about, for every method.
 
     Parameters
@@ -69,6 +74,8 @@ def headline(kind, metrics, has_init=False):
         The scenario's metrics.json content.
     has_init : bool
         Whether the methods start from a prescribed initial misalignment (the figure is then the settling time).
+    experiment : str
+        The scenario's experiment; one with a ``headline(metrics)`` of its own gives the column.
 
     Returns
     -------
@@ -77,34 +84,13 @@ def headline(kind, metrics, has_init=False):
         azimuth settling time (s) from a prescribed initial error; a noise jump: the azimuth RMS inside the
         jump window (arcmin); moving-alignment: the final azimuth RMS against the truth (arcmin);
         navigation: the level RMSE in the scenario's window (arcmin, with the reduction in the note);
-        calibration: the coefficient groups within the paper's claim and the worst error over the claim;
-        conformance: claimed cells passed and the worst azimuth efficiency.
+        another experiment's own column (e.g. the conformance matrix: claimed cells passed and the worst azimuth
+        efficiency).
     """
     name, methods = metrics["scenario"], metrics["methods"]
-    if kind == "conformance":
-        col = Column(name, kind, "cells passed of claimed; worst azimuth efficiency (1 optimal)", short="passed; worst eff.")
-        for meth, cells in metrics.get("cells", {}).items():
-            claimed = [c for c in cells.values() if c.get("status") not in ("not claimed", None)]
-            passed = sum(c["status"] == "pass" for c in claimed)
-            effs = [c["efficiency_U"] / c["efficiency_max"] for c in claimed if "efficiency_U" in c]
-            worst = max((c["efficiency_U"] for c in claimed if "efficiency_U" in c), default=None)
-            fail = len(claimed) - passed
-            text = f"{passed}/{len(claimed)}" + (f"; {worst:.2f}" if worst is not None else "")
-            col.values[meth] = (fail + max(effs, default=0.0), text) if claimed else (None, "claims none")
-        return col
-    if kind == "calibration":
-        col = Column(name, kind, "coefficient groups within the paper's claim; worst |mean error| / claim",
-                     short="within claim; worst / claim")
-        for meth, r in methods.items():
-            ratios = {g: v["max_abs_error_mean"] / v["paper_below"] for g, v in r.get("groups", {}).items()
-                      if v.get("paper_below")}
-            if not ratios:
-                col.values[meth] = (None, "no claim")
-                continue
-            worst = max(ratios, key=ratios.get)
-            within = sum(v <= 1.0 for v in ratios.values())
-            col.values[meth] = (ratios[worst], f"{within}/{len(ratios)}; {ratios[worst]:.3g} ({worst})")
-        return col
+    exp = load_experiment(experiment)
+    if hasattr(exp, "headline"):  # an experiment that scores its own figure (a conformance matrix, a calibration)
+        return exp.headline(metrics)
     if kind == "navigation":
         note = f"reduction {metrics['reduction_percent']:.1f} %" if "reduction_percent" in metrics else ""
         col = Column(name, kind, "level RMSE in the window (arcmin)", note, short="level RMSE, arcmin")
@@ -151,15 +137,12 @@ def _flag_diverged(col, metrics):
 
 def grade(col, method):
     """``good``, ``fair``, ``poor`` or ``none``: a cell against its column's best (GOOD_FACTOR, POOR_FACTOR);
-    a conformance cell is good when every claimed cell passed, poor otherwise; a calibration cell good within
-    the claim."""
+    in a column of claims (``Column.claim``) good when the claim is met (value <= 1)."""
     value = col.values.get(method, (None, ""))[0]
     if value is None:
         return "none"
-    if col.kind == "conformance":
-        return "good" if value <= 1.0 else "poor"
-    if col.kind == "calibration":
-        return "good" if value <= 1.0 else "fair" if value <= POOR_FACTOR else "poor"
+    if col.claim:
+        return "good" if value <= 1.0 else "poor" if col.strict or value > POOR_FACTOR else "fair"
     if value == float("inf"):
         return "poor"
     ranked = [v for v, _ in col.values.values() if v is not None and v != float("inf")] or [value]
@@ -275,8 +258,8 @@ def write_overview(folder, results, wall_total=None):
     folder = Path(folder)
     columns, entries = [], []
     for scn, metrics, report_md in results:
-        columns.append(_flag_diverged(headline(getattr(scn, "kind", "alignment"), metrics,
-                                               getattr(scn, "init_misalignment", None) is not None), metrics))
+        columns.append(_flag_diverged(headline(scn.kind, metrics, getattr(scn, "init_misalignment", None) is not None,
+                                               scn.experiment), metrics))
         entries.append((metrics["scenario"], {"description": getattr(scn, "description", ""), **metrics}, report_md))
         page = Path(report_md).with_suffix(".html")
         if not page.exists():

@@ -25,7 +25,8 @@ def _diverged(out):
     return fg.diverged_histories({n: (oc.t, oc.phi / units.ARCMIN) for n, oc in out.outcomes.items()})
 
 
-def _context(out):
+def run_context(out):
+    """The :func:`fusionbench.figures.context` of an alignment run (its methods, events, time axis, diverged ones)."""
     return fg.context(out.scenario, out.metrics, {n: oc.t for n, oc in out.outcomes.items()}, _diverged(out))
 
 
@@ -33,7 +34,7 @@ def error_figure(out, path):
     """Misalignment (E, N, U, arcmin) against time: per method the median over runs and the 16-84 percentile
     band; a diverged method apart; the stationary limit dashed only for the alignment kind; the y range is
     what the other methods span after ``zoom_from_s`` (the whole record for navigation). Returns the Figure."""
-    c = _context(out)
+    c = run_context(out)
     lim = out.limits / units.ARCMIN
     t_from = 0.0 if out.scenario.kind == "navigation" else out.scenario.zoom_from_s
     rows = [(i, f"phi{'ENU'[i]} (arcmin)", t_from, False, [(lim[i], "--", "limit")] if c.deco["limit"] else [])
@@ -51,7 +52,7 @@ def azimuth_figure(out, path):
     """Azimuth error against time (like seed 000's Figs. 3 and 4): above, the RMS over runs on a log scale over
     the whole record; below, from the scenario's ``zoom_from_s``, median and 16-84 % band, with the limit and the
     settling band where they apply (alignment kind). Returns the Figure."""
-    c = _context(out)
+    c = run_context(out)
     t0 = out.scenario.zoom_from_s
     lim, band = out.limits[2] / units.ARCMIN, out.scenario.settling_band_arcmin
     rows = [("rms", "rms over runs of |phiU| (arcmin)", 0.0, True, [(abs(lim), "--", "|limit|")] * c.deco["limit"]),
@@ -75,67 +76,18 @@ def azimuth_figure(out, path):
     return fig
 
 
-def level_figure(out, path):
-    """Level misalignment (phiE, phiN, arcmin) against time, median and 16-84 % band of every method, with the
-    scenario's RMSE window shaded and the events marked (like seed 004's Figs. 9-11). Returns the Figure."""
-    c = _context(out)
-    fig, axes = fg.small_multiples(c, [(i, f"phi{'EN'[i]} (arcmin)", 0.0, False, []) for i in range(2)],
-                                   lambda n, i: out.outcomes[n].phi[..., i] / units.ARCMIN)
-    win = out.scenario.rmse_window_s
-    if win is not None:
-        for ax in axes.ravel():
-            ax.axvspan(win[0] / c.scale, win[1] / c.scale, color="tab:blue", alpha=0.08, lw=0)
-    fg.finish(fig, f"{c.title}: level errors, median over runs and 16-84 % band",
-              fg.notes(c, "" if win is None else f"Blue: the RMSE window, {win[0] / c.scale:.4g} to "
-                    f"{win[1] / c.scale:.4g} {c.unit}."))
-    save_png(fig, path)
-    return fig
-
-
 def series_figure(out, path):
     """Series a method reports about itself (e.g. a damping coefficient), median and band over runs, a panel per
     series; the axis label from the method's optional ``series_labels`` mapping. Returns the Figure."""
-    c = _context(out)
-    keys = list(dict.fromkeys(k for oc in out.outcomes.values() for k in oc.extra.get("series", {})))
-    c.names = [n for n in c.names if out.outcomes[n].extra.get("series")]
+    c = run_context(out)
+    keys = list(dict.fromkeys(k for oc in out.outcomes.values() for k in oc.series))
+    c.names = [n for n in c.names if out.outcomes[n].series]
     c.bad = []
     fig, _ = fg.small_multiples(c, [(k, fg.series_label(c.methods, k), 0.0, False, []) for k in keys],
-                                lambda n, k: out.outcomes[n].extra["series"].get(k))
+                                lambda n, k: out.outcomes[n].series.get(k))
     fg.finish(fig, f"{c.title}: series reported by the methods, median over runs", fg.notes(c))
     save_png(fig, path)
     return fig
-
-
-def _window_section(out):
-    m = out.metrics
-    rows = [(n, r) for n, r in m["methods"].items() if "window_rmse_arcmin" in r or "amplitude_arcmin" in r]
-    if not rows:
-        return ""
-    lines = ["## Attitude over the run", ""]
-    win = out.scenario.rmse_window_s
-    amp_names = list(out.scenario.amplitude_windows_s)
-    head = "| method |"
-    if win is not None:
-        head += f" RMSE {win[0]:.0f}-{win[1]:.0f} s: E / N / level |"
-    head += "".join(f" amplitude '{w}' {out.scenario.amplitude_windows_s[w][0]:.0f}-"
-                    f"{out.scenario.amplitude_windows_s[w][1]:.0f} s: E / N |" for w in amp_names)
-    lines += ["Level misalignment, arcmin: RMS over runs and the window's time, and the half peak-to-peak "
-              "in each amplitude window (mean over runs):", "", head, "|---" * (head.count("|") - 1) + "|"]
-    for n, r in rows:
-        row = f"| {n} |"
-        if win is not None:
-            w = r.get("window_rmse_arcmin")
-            row += f" {w['E']:.3f} / {w['N']:.3f} / {w['level']:.3f} |" if w else " - |"
-        for a in amp_names:
-            v = r.get("amplitude_arcmin", {}).get(a)
-            row += f" {v['E']:.3f} / {v['N']:.3f} |" if v else " - |"
-        lines.append(row)
-    if "reduction_percent" in m:
-        base, cand = out.scenario.compare
-        lines += ["", f"Level RMSE in the window: `{base}` {m[f'rmse_{base}_arcmin']:.3f} arcmin, `{cand}` "
-                  f"{m[f'rmse_{cand}_arcmin']:.3f} arcmin; reduction 100 (base - candidate) / base = "
-                  f"**{m['reduction_percent']:.1f} %**."]
-    return "\n".join(lines) + "\n"
 
 
 def _method_figures(out, folder):
@@ -152,49 +104,20 @@ def _method_figures(out, folder):
     return seen
 
 
-def _paper_section(out):
-    paper = out.scenario.paper
-    if not paper:
-        return ""
-    lines = [f"## Beside the paper ({paper.get('reference', 'source paper')})", ""]
-    claims = paper.get("settling_time_s", {})
-    if claims:
-        band = out.scenario.settling_band_arcmin
-        lines += [f"| method | paper: azimuth settles in (s) | here: mean (max) settling in a {band:g} arcmin band (s) "
-                  "| final phiU rms (arcmin) |", "|---|---|---|---|"]
-        for name, r in out.metrics["methods"].items():
-            st = r["settling_time_s"]["U"]
-            base = out.scenario.variants.get(name, {}).get("method", name)
-            lines.append(f"| {name} | {claims.get(base, '-')} | {st['mean']:.0f} ({st['max_abs']:.0f}) "
-                         f"| {r['final_error_arcmin']['U']['rms']:.2f} |")
-        lines.append("")
-    if paper.get("note"):
-        lines += [paper["note"].strip(), ""]
-    return "\n".join(lines)
-
-
-def _jump_section(m):
-    rows = [(n, r["jump"]) for n, r in m["methods"].items() if "jump" in r]
-    if not rows:
-        return ""
-    a, b = rows[0][1]["window_s"]
-    lines = [f"## Noise jump ({a:g} s to {b:g} s)", "",
-             "Misalignment RMS over runs and time in each part of the record, peak |error| from the jump on, and "
-             "the time after the jump ends until phiU stays within the settling band of its final value "
-             "(arcmin, s):", "",
-             "| method | before E/N/U | during E/N/U | after E/N/U | peak E/N/U | re-converge (mean, max) |",
-             "|---|---|---|---|---|---|"]
-    fmt = lambda d: " / ".join(f"{d[ax]:.2f}" for ax in "ENU") if d else "-"  # noqa: E731
-    for n, j in rows:
-        r = j["rms_arcmin"]
-        lines.append(f"| {n} | {fmt(r.get('before'))} | {fmt(r.get('during'))} | {fmt(r.get('after'))} "
-                     f"| {fmt(j['peak_arcmin'])} | {j['reconverge_s']['mean']:.0f}, {j['reconverge_s']['max_abs']:.0f} |")
+def _consistency_section(m):
     cons = [(n, r["consistency_rms_ratio"]) for n, r in m["methods"].items() if "consistency_rms_ratio" in r]
-    if cons:
-        lines += ["", "Filter consistency at the end: RMS over runs of the actual error over the predicted sigma "
-                  "(1 for a consistent filter):", "", "| method | E | N | U |", "|---|---|---|---|"]
-        lines += [f"| {n} | {c['E']:.2f} | {c['N']:.2f} | {c['U']:.2f} |" for n, c in cons]
+    if not cons:
+        return ""
+    lines = ["Filter consistency at the end: RMS over runs of the actual error over the predicted sigma "
+             "(1 for a consistent filter):", "", "| method | E | N | U |", "|---|---|---|---|"]
+    lines += [f"| {n} | {c['E']:.2f} | {c['N']:.2f} | {c['U']:.2f} |" for n, c in cons]
     return "\n".join(lines) + "\n"
+
+
+def paper_section(out):
+    """The ``[paper]`` features' sections of a run (:class:`fusionbench.features.paper.PaperClaims`): the source
+    paper's claims beside ours; "" when the scenario has none."""
+    return "".join(f.markdown(out) for f in getattr(out.scenario, "features", ()) if f.table == "paper")
 
 
 def _table(m, kind):
@@ -242,10 +165,9 @@ def write_alignment_report(out, folder):
     error_figure(out, folder / fig_name)
     azimuth_figure(out, folder / "azimuth.png")
     extra_figs = {}
-    if scn.rmse_window_s is not None or scn.amplitude_windows_s:
-        level_figure(out, folder / "level.png")
-        extra_figs["level.png"] = "level errors against time"
-    if any(oc.extra.get("series") for oc in out.outcomes.values()):
+    for feature in scn.features:
+        extra_figs.update(feature.report_figures(out, folder))
+    if any(oc.series for oc in out.outcomes.values()):
         series_figure(out, folder / "series.png")
         extra_figs["series.png"] = "series reported by the methods"
     extra_figs.update(_method_figures(out, folder))
@@ -279,10 +201,10 @@ Level errors over the last 100 s, RMS over runs and time (arcmin):
 
 ![azimuth error vs time](azimuth.png)
 
-{_jump_section(m)}
-{_window_section(out)}
+{_consistency_section(m)}
+{"".join(feature.markdown(out) + chr(10) for feature in scn.features if feature.table == "metrics")}
 {extra_md}
-{_paper_section(out)}
+{paper_section(out)}
 Reproduce: `fusionbench run {m['scenario']} --runs {m['runs']} --seed {m['seed']}{' --quick' if m['quick'] else ''}`
 """
     write_metrics(folder / "metrics.json", m)

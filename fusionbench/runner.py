@@ -35,29 +35,50 @@ BATCH_BYTES = 200e6
 class BatchOutcome:
     """One method on one batch of runs: what the runner keeps before the batches are joined.
 
-    ``t`` (M,) s and ``phi`` (R, M, 3) rad are the decimated history, ``phi_end`` (R, 3) rad the misalignment at
-    the last sample, ``wall_s`` the method's time on the batch, ``per_run`` per-run figures over the batch's runs
-    (arrays, or dicts of arrays, with the runs first), ``figures`` the scalar figures the method reports."""
+    ``t`` (M,) s and ``phi`` (R, M, 3) rad are the decimated history, ``wall_s`` the method's time on the batch,
+    ``per_run`` the per-run figures of :class:`MethodOutcome` over the batch's runs, ``series`` the method's own
+    series (R, M) at ``t``, ``figures`` the scalar figures the method reports."""
 
     description: str
     t: np.ndarray
     phi: np.ndarray
-    phi_end: np.ndarray
     wall_s: float
     per_run: dict
+    series: dict
     figures: dict
 
 
 @dataclass
 class MethodOutcome:
-    """One method's results over all runs: history times t (M,) s, misalignment phi (R, M, 3) rad."""
+    """One method's results over all runs.
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        History times, s (at most HISTORY_POINTS of the method's own).
+    phi : ndarray, shape (R, M, 3)
+        Misalignment against truth (E, N, U), rad, at ``t``.
+    wall_s : float
+        The method's time over all runs, s.
+    per_run : dict
+        Per-run figures, the runs first: ``phi_end`` (R, 3) rad at the last sample, ``settle`` (R,) s (NaN where
+        not measured), ``settled`` (R,) bool, ``level_ms`` (R, 2) rad^2 over the last LEVEL_WINDOW_S, ``sigma_end``
+        (R, 3) rad the method's predicted sigma at the end (NaN without one), and the metric features' own
+        (:meth:`fusionbench.features.Feature.collect`).
+    series : dict of str to ndarray, shape (R, M)
+        What the method reports about itself at ``t`` (:attr:`fusionbench.aligner.AlignmentResult.series`).
+    figures : dict of str to float
+        Its scalar figures (:attr:`fusionbench.aligner.AlignmentResult.figures`).
+    """
 
     name: str
     description: str
     t: np.ndarray
     phi: np.ndarray
     wall_s: float
-    extra: dict = field(default_factory=dict)
+    per_run: dict = field(default_factory=dict)
+    series: dict = field(default_factory=dict)
+    figures: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -76,26 +97,6 @@ def _decimate(t):
     if t.size <= HISTORY_POINTS:
         return np.arange(t.size)
     return np.unique(np.linspace(0, t.size - 1, HISTORY_POINTS).round().astype(int))
-
-
-def _window_figures(scn, t, phi):
-    """Per-run figures over the scenario's windows: mean squares in rmse_window_s (E, N, U, level) and half
-    peak-to-peak in each amplitude window (E, N, U), rad^2 and rad; windows without samples are left out."""
-    out = {}
-    if scn.rmse_window_s is not None:
-        a, b = scn.rmse_window_s
-        sel = (t >= a) & (t <= b)
-        if sel.any():
-            ms = np.mean(phi[:, sel] ** 2, axis=1)
-            out["rmse_ms"] = np.concatenate([ms, ms[:, :2].sum(axis=1, keepdims=True)], axis=1)  # E, N, U, level
-    amp = {}
-    for name, (a, b) in scn.amplitude_windows_s.items():
-        sel = (t >= a) & (t <= b)
-        if sel.any():
-            amp[name] = 0.5 * (phi[:, sel].max(axis=1) - phi[:, sel].min(axis=1))
-    if amp:
-        out["amplitude"] = amp
-    return out
 
 
 def _simulate_batch(scn, first_run, runs, seed, duration):
@@ -154,20 +155,13 @@ def _align_batch(scn, name, sim, first_run, refusals):
     t_h, phi_h = res.t[idx], phi[:, idx]
     last = res.t >= res.t[-1] - LEVEL_WINDOW_S
     level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-    extra = {"level_ms": level_ms, "sigma_end": np.full((phi.shape[0], 3), np.nan) if res.sigma_phi is None
-             else res.sigma_phi[:, -1],
-             "settle": settle, "settled": done}
-    if scn.jump_window_s is not None:
-        a, b = scn.jump_window_s
-        parts = {"before": res.t < a, "during": (res.t >= a) & (res.t < b), "after": res.t >= b}
-        extra["window_ms"] = {k: np.mean(phi[:, sel] ** 2, axis=1) for k, sel in parts.items() if sel.any()}
-        extra["peak"] = np.max(np.abs(phi[:, res.t >= a]), axis=1)
-        after = res.t >= b
-        extra["reconverge"] = metrics.settling_time(res.t[after], phi[:, after, 2], band, limit_u[after]) - b
-    extra.update(_window_figures(scn, res.t, phi))
+    per_run = {"phi_end": phi[:, -1], "level_ms": level_ms, "settle": settle, "settled": done,
+               "sigma_end": np.full((phi.shape[0], 3), np.nan) if res.sigma_phi is None else res.sigma_phi[:, -1]}
+    for feature in scn.features:  # the scenario's metric features: their per-run figures
+        per_run.update(feature.collect(res.t, phi, band, limit_u))
     # what a method reports about itself: scalar figures and (R, M) series kept like the history
-    extra["series"] = {k: np.asarray(v)[:, idx] for k, v in res.series.items()}
-    return BatchOutcome(desc, t_h, phi_h, phi[:, -1], wall, extra, res.figures)
+    series = {k: np.asarray(v)[:, idx] for k, v in res.series.items()}
+    return BatchOutcome(desc, t_h, phi_h, wall, per_run, series, res.figures)
 
 
 #: Spacing of the record prefixes on which a smoother's settling is measured, s.
@@ -241,27 +235,10 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     """Run an alignment scenario's Monte Carlo and compute its metrics (the ``alignment`` experiment;
     :func:`fusionbench.experiment.run_scenario` runs any scenario).
 
-    Parameters
-    ----------
-    scn : fusionbench.scenarios.Scenario
-        The scenario.
-    methods : sequence of str, optional
-        Method names or ``module:Class`` paths (default: the scenario's list).
-    runs : int, optional
-        Monte Carlo runs (default: the scenario's full or quick size).
-    seed : int
-        Seed; run k of seed s gives the same numbers whatever the batch size or worker count.
-    quick : bool
-        Use the scenario's reduced duration and run count.
-    n_jobs : int
-        Parallel workers over batches (joblib; -1: all cores); 1, or a single batch, runs in this process.
-    progress : bool or bar, optional
-        Show a tqdm bar over runs (default: only when stderr is a terminal).
-    batch_size : int, optional
-        Runs per batch (default: as many as fit in about 200 MB of IMU samples).
-    refusals : bool
-        Record a method that refuses the data (ValueError) in ``RunOutput.refused`` (name: message) and leave it
-        out of the metrics, instead of stopping (the conformance matrix, where refusing can be right).
+    Parameters are :func:`fusionbench.experiment.run_scenario`'s; here ``n_jobs`` are workers over batches (1, or a
+    single batch, runs in this process), ``batch_size`` defaults to as many runs as fit in about 200 MB of IMU
+    samples, and with ``refusals`` a method that refuses the data (ValueError) is recorded in
+    ``RunOutput.refused`` (name: message) and left out of the metrics instead of stopping the run.
 
     Returns
     -------
@@ -276,10 +253,8 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
     if int(seed) < 0:
         raise ValueError(f"seed: expected a non-negative integer, found {seed}")
-    if scn.jump_window_s is not None and scn.jump_window_s[1] >= duration:
-        raise ValueError(f"{scn.source or scn.name}: metrics.jump_window_s {list(scn.jump_window_s)} ends after the "
-                         f"record of {duration:g} s{' (--quick: [quick] duration_s)' if quick else ''}: expected a "
-                         f"window that ends before it")
+    for feature in scn.features:
+        feature.validate(duration, quick, scn.source or scn.name)
     n_samples = int(round(duration / scn.dt))
     if batch_size is None:
         batch_size = int(max(1, min(runs, BATCH_BYTES // (n_samples * 48))))
@@ -318,12 +293,12 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
             refused[name] = next(p for p in parts if isinstance(p, str))
             continue
         first = parts[0]
-        extra = {"phi_end": np.concatenate([p.phi_end for p in parts]), "figures": first.figures}
-        for key, val in first.per_run.items():
-            extra[key] = ({k: np.concatenate([p.per_run[key][k] for p in parts]) for k in val} if isinstance(val, dict)
-                          else np.concatenate([p.per_run[key] for p in parts]))
-        outcomes[name] = MethodOutcome(name, first.description, first.t, np.concatenate([p.phi for p in parts]),
-                                       sum(p.wall_s for p in parts), extra)
+        join = lambda get: np.concatenate([get(p) for p in parts])  # noqa: E731 (batches along the runs)
+        per_run = {key: ({k: join(lambda p: p.per_run[key][k]) for k in val} if isinstance(val, dict)
+                         else join(lambda p: p.per_run[key])) for key, val in first.per_run.items()}
+        series = {key: join(lambda p: p.series[key]) for key in first.series}
+        outcomes[name] = MethodOutcome(name, first.description, first.t, join(lambda p: p.phi),
+                                       sum(p.wall_s for p in parts), per_run, series, first.figures)
     return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits, refused)
 
 
@@ -339,51 +314,29 @@ def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
         "methods": {},
     }
     for name, oc in outcomes.items():
-        phi_end = oc.extra["phi_end"] / units.ARCMIN
-        settle = oc.extra["settle"]
+        phi_end = oc.per_run["phi_end"] / units.ARCMIN
+        settle = oc.per_run["settle"]
         out["methods"][name] = {
             "final_error_arcmin": {ax: metrics.stats(phi_end[:, i]) for i, ax in enumerate("ENU")},
             # a smoother's settling is measured on the first PREFIX_RUNS runs only (NaN elsewhere)
             "settling_time_s": {"U": metrics.stats(settle[np.isfinite(settle)]), "band_arcmin": band},
-            "settled_fraction_U": float(np.mean(oc.extra["settled"])),
+            "settled_fraction_U": float(np.mean(oc.per_run["settled"])),
             "wall_s": float(oc.wall_s),
             "final_minus_limit_arcmin": {ax: float(np.mean(phi_end[:, i]) - limits[i] / units.ARCMIN)
                                          for i, ax in enumerate("ENU")},
-            "level_rms_last_100s_arcmin": {ax: float(np.sqrt(oc.extra["level_ms"][:, i].mean()) / units.ARCMIN)
+            "level_rms_last_100s_arcmin": {ax: float(np.sqrt(oc.per_run["level_ms"][:, i].mean()) / units.ARCMIN)
                                            for i, ax in enumerate("EN")},
         }
-        sig = oc.extra["sigma_end"]
+        sig = oc.per_run["sigma_end"]
         if np.all(np.isfinite(sig)):  # filters: actual error over predicted sigma, RMS over runs
-            ratio = np.sqrt(np.mean((oc.extra["phi_end"] / sig) ** 2, axis=0))
+            ratio = np.sqrt(np.mean((oc.per_run["phi_end"] / sig) ** 2, axis=0))
             out["methods"][name]["consistency_rms_ratio"] = {ax: float(ratio[i]) for i, ax in enumerate("ENU")}
         entry = out["methods"][name]
-        if "rmse_ms" in oc.extra:
-            rms = np.sqrt(oc.extra["rmse_ms"].mean(axis=0)) / units.ARCMIN
-            entry["window_rmse_arcmin"] = {"window_s": list(scn.rmse_window_s),
-                                           **{ax: float(rms[i]) for i, ax in enumerate(("E", "N", "U", "level"))}}
-        if "amplitude" in oc.extra:
-            entry["amplitude_arcmin"] = {w: {ax: float(np.mean(v[:, i]) / units.ARCMIN) for i, ax in enumerate("ENU")}
-                                         for w, v in oc.extra["amplitude"].items()}
-        entry.update(oc.extra["figures"])
-        if scn.jump_window_s is not None:
-            a, b = scn.jump_window_s
-            reconv = oc.extra["reconverge"]
-            out["methods"][name]["jump"] = {
-                "window_s": [a, b],
-                "rms_arcmin": {k: {ax: float(np.sqrt(ms[:, i].mean()) / units.ARCMIN) for i, ax in enumerate("ENU")}
-                               for k, ms in oc.extra["window_ms"].items()},
-                "peak_arcmin": {ax: float(oc.extra["peak"][:, i].max() / units.ARCMIN) for i, ax in enumerate("ENU")},
-                "reconverge_s": metrics.stats(reconv),
-            }
-    if scn.compare is not None and all(n in out["methods"] and "window_rmse_arcmin" in out["methods"][n]
-                                       for n in scn.compare):
-        base, cand = scn.compare
-        rb = out["methods"][base]["window_rmse_arcmin"]["level"]
-        rc = out["methods"][cand]["window_rmse_arcmin"]["level"]
-        out[f"rmse_{base}_arcmin"] = rb
-        out[f"rmse_{cand}_arcmin"] = rc
-        out["reduction_percent"] = float(100.0 * (rb - rc) / rb) if rb > 0 else 0.0  # seed 004 eq. 14
-        out.update(outcomes[cand].extra["figures"])  # what the candidate reports about itself (e.g. map_mse)
+        for feature in scn.features:
+            entry.update(feature.summarise(oc.per_run))
+        entry.update(oc.figures)
+    for feature in scn.features:
+        out.update(feature.summarise_run(out, outcomes))
     return out
 
 

@@ -100,7 +100,7 @@ def test_efficiency_is_rms_error_over_an_independent_bound(mini):
     limit = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_end, scn.site.lat,
                                        scn.site.h)[0]
     for name in ("coarse", "kf"):
-        err = run.outcomes[name].extra["phi_end"][:, 2] - limit[2]
+        err = run.outcomes[name].per_run["phi_end"][:, 2] - limit[2]
         expect = np.sqrt(np.mean(err**2)) / sigma[-1, 2]
         cell = out.metrics["cells"][name]["static-nav"]
         assert cell["efficiency_U"] == pytest.approx(expect, rel=1e-9)

@@ -24,11 +24,12 @@ import pytest
 from fusionbench import aligner, calibration, conformance, imu, scenarios, units
 from fusionbench import platform as pf
 from fusionbench.experiment import available_experiments, load_experiment
+from fusionbench.features import compare as feat_compare, jump as feat_jump, paper as feat_paper, windows as feat_windows
 
 ROOT = Path(__file__).parents[1]
 DOC_PATH = ROOT / "docs" / "scenarios.md"
 DOC = DOC_PATH.read_text()
-PARSERS = (scenarios, imu, conformance, calibration)
+PARSERS = (scenarios, imu, conformance, calibration, feat_jump, feat_windows, feat_compare, feat_paper)
 
 
 # ----------------------------------------------------------------------------------------------- the page, read
@@ -95,7 +96,7 @@ def _literal_strings(node):
 def parser_keys():
     """Every key a parser accepts: the key-set constants, plus every set of strings written in a parser's source
     (the inline key sets: a segment's, a schedule's, a scheme segment's, the conformance sub-tables')."""
-    keys = (set(scenarios._TOP) | set().union(*scenarios._SECTIONS.values()) | set(imu.SPEC_KEYS)
+    keys = (set(scenarios._TOP) | set().union(*scenarios.sections().values()) | set(imu.SPEC_KEYS)
             | set(conformance._TOP) | set(conformance._CONDITION_KEYS) | set(calibration.PLATFORM_KEYS)
             | set(calibration._GROUP_KEYS) | set(calibration.PlatformRolling.tables) | {"method"})  # a [variants.NAME] table's own key (the rest are options)
     for module in PARSERS:
@@ -365,8 +366,8 @@ def test_minimal_example_is_what_the_page_says(tmp_path):
 def test_noise_jump_example_is_what_the_page_says(tmp_path):
     scn = _load(tmp_path, "my-gyro-jump")
     assert scn.imu_spec.schedules == (imu.NoiseSchedule(200.0, 400.0, 100.0, ("gyro",)),)
-    assert scn.jump_window_s == (200.0, 400.0)
-    assert scn.jump_window_s[1] < scn.sized(True)[0]  # the jump window inside the --quick record
+    assert (scn.feature("jump").start_s, scn.feature("jump").end_s) == (200.0, 400.0)
+    assert scn.feature("jump").end_s < scn.sized(True)[0]  # the jump window inside the --quick record
     assert scn.vref_spec.sigma == (0.01, 0.01, 0.01)
     assert scn.variants["akf-fast"] == {"method": "akf", "b": 0.95}
 

@@ -92,13 +92,13 @@ def test_headlines_of_navigation_and_calibration_and_conformance():
         "gyro bias": {"max_abs_error_mean": 0.0005, "paper_below": 0.001},
         "accel bias": {"max_abs_error_mean": 3.0, "paper_below": 1.0},
         "axis angles": {"max_abs_error_mean": 9.0, "paper_below": None}}}}}
-    col = headline("calibration", cal)
+    col = headline("calibration", cal, experiment="platform-rolling")
     assert col.values["ekf"] == (3.0, "1/2; 3 (accel bias)") and grade(col, "ekf") == "fair"
     conf = {"scenario": "m", "methods": {}, "cells": {"a": {
         "c1": {"status": "pass", "efficiency_U": 1.2, "efficiency_max": 1.5},
         "c2": {"status": "fail", "efficiency_U": 2.0, "efficiency_max": 1.5},
         "c3": {"status": "not claimed"}}}}
-    col = headline("conformance", conf)
+    col = headline("conformance", conf, experiment="conformance")
     assert col.values["a"][1] == "1/2; 2.00" and grade(col, "a") == "poor"
 
 

@@ -268,10 +268,10 @@ def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(t
     limit = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_true, scn.site.lat)[:, 2]
     expect = metrics.settling_time(ends, err, 15.0 * units.ARCMIN, limit)
     assert expect.max() >= 50.0  # it does take time to settle in a 15-arcmin band
-    assert np.array_equal(out.outcomes[smoother].extra["settle"], expect)
-    assert np.all(out.outcomes[smoother].extra["settled"])
+    assert np.array_equal(out.outcomes[smoother].per_run["settle"], expect)
+    assert np.all(out.outcomes[smoother].per_run["settled"])
     # the causal method measured on its own (denser) history settles no earlier than on the 25-s grid
-    assert np.all(out.outcomes["coarse"].extra["settle"] >= expect - 25.0)
+    assert np.all(out.outcomes["coarse"].per_run["settle"] >= expect - 25.0)
 
 
 def test_smoother_settling_on_the_first_runs_whatever_the_batching(tmp_path):
@@ -287,11 +287,11 @@ def test_smoother_settling_on_the_first_runs_whatever_the_batching(tmp_path):
     smoother = "tests.test_runner:WholeRecordCoarse"
     one = run_scenario(scn, methods=[smoother], runs=7, seed=2, progress=False)
     split = run_scenario(scn, methods=[smoother], runs=7, seed=2, progress=False, batch_size=3)
-    s1, s2 = one.outcomes[smoother].extra["settle"], split.outcomes[smoother].extra["settle"]
+    s1, s2 = one.outcomes[smoother].per_run["settle"], split.outcomes[smoother].per_run["settle"]
     assert PREFIX_RUNS == 5 and np.all(np.isfinite(s1[:5])) and np.all(np.isnan(s1[5:]))
     assert np.array_equal(s1, s2, equal_nan=True)
     assert one.metrics["methods"][smoother]["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(s1[:5]))
-    assert one.outcomes[smoother].extra["settled"].shape == (7,)  # inside the band at the end: known for every run
+    assert one.outcomes[smoother].per_run["settled"].shape == (7,)  # inside the band at the end: known for every run
 
 
 class _Counter:

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import attitude, fields, imu, trajectory
+from .. import attitude, features, fields, imu, trajectory
 from ..aligner import Site
 from ..experiment import load_experiment
 
@@ -51,10 +51,17 @@ _SECTIONS = {
     "imu": set(imu.SPEC_KEYS),
     "vref": {"sigma_mps", "schedule"},
     "init": {"misalignment_deg"},
-    "metrics": {"settling_band_arcmin", "zoom_from_s", "jump_window_s", "rmse_window_s", "amplitude_windows_s",
-                "compare"},
-    "paper": {"reference", "note", "settling_time_s"},
+    "metrics": {"settling_band_arcmin", "zoom_from_s"},  # and the keys of the metric features
 }
+
+
+def sections():
+    """Every table of a scenario file with its keys: the core's and the metric features' (``[metrics]``,
+    ``[paper]``: :mod:`fusionbench.features`)."""
+    out = {k: set(v) for k, v in _SECTIONS.items()}
+    for table in ("metrics", "paper"):
+        out.setdefault(table, set()).update(features.table_keys(table))
+    return out
 
 
 #: An invalid scenario file or field: one line naming the file and the field (the FieldError of
@@ -85,12 +92,8 @@ class Scenario:
     init_misalignment: tuple | None
     settling_band_arcmin: float
     variants: dict = field(default_factory=dict)
-    paper: dict = field(default_factory=dict)
     zoom_from_s: float = 100.0
-    jump_window_s: tuple | None = None
-    rmse_window_s: tuple | None = None
-    amplitude_windows_s: dict = field(default_factory=dict)
-    compare: tuple | None = None
+    features: tuple = ()
     experiment: str = "alignment"
     setup: dict = field(default_factory=dict)
     source: str = ""
@@ -118,6 +121,10 @@ class Scenario:
         C_n_nprime = attitude.euler_platform_to_dcm(np.radians(self.init_misalignment))
         return C_n_nprime @ C_bn_true
 
+    def feature(self, name):
+        """The scenario's metric feature ``name`` (:mod:`fusionbench.features`), or None."""
+        return next((f for f in self.features if f.name == name), None)
+
     def method(self, name):
         """Instantiate a method by scenario variant name, registered name or ``module:Class`` path, through the
         scenario's experiment (:meth:`fusionbench.experiment.Experiment.load_method`: an aligner gets the
@@ -143,35 +150,6 @@ def _imu_spec(d, src):
     return imu.spec_from_table(d, src)
 
 
-def _window(d, key, src, duration, label=None):
-    label = label or "metrics." + key
-    w = d[key]
-    if (not isinstance(w, list) or len(w) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                          for x in w) or not 0 <= w[0] < w[1] <= duration):
-        raise ScenarioError(f"{_where(src, label)}: expected [start, end] with 0 <= start < end <= duration_s, found {w!r}")
-    return (float(w[0]), float(w[1]))
-
-
-def _window_metrics(m, src, duration, methods):
-    """rmse_window_s, amplitude_windows_s and compare of [metrics], validated."""
-    win = _window(m, "rmse_window_s", src, duration) if "rmse_window_s" in m else None
-    amp = m.get("amplitude_windows_s", {})
-    if not isinstance(amp, dict):
-        raise ScenarioError(f"{_where(src, 'metrics.amplitude_windows_s')}: expected a table of name = [start, end], "
-                            f"found {amp!r}")
-    amp = {name: _window(amp, name, src, duration, f"metrics.amplitude_windows_s.{name}") for name in amp}
-    compare = m.get("compare")
-    if compare is not None:
-        if (not isinstance(compare, list) or len(compare) != 2 or not all(isinstance(c, str) for c in compare)
-                or not set(compare) <= set(methods)):
-            raise ScenarioError(f"{_where(src, 'metrics.compare')}: expected two of the scenario's methods "
-                                f"{methods}, found {compare!r}")
-        if win is None:
-            raise ScenarioError(f"{_where(src, 'metrics.compare')}: needs metrics.rmse_window_s, found none")
-        compare = tuple(compare)
-    return win, amp, compare
-
-
 def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     """Validate a scenario mapping (as read from TOML) and build a :class:`Scenario`.
 
@@ -181,7 +159,7 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     unknown = set(data) - _TOP - set(tables)
     if unknown:
         raise ScenarioError(f"{_where(src, sorted(unknown)[0])}: unknown (expected one of {sorted(_TOP)})")
-    for sec, keys in _SECTIONS.items():
+    for sec, keys in sections().items():
         if sec in data:
             if not isinstance(data[sec], dict):
                 raise ScenarioError(f"{_where(src, sec)}: expected a table, found {data[sec]!r}")
@@ -236,17 +214,14 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     mis = _vec(init, "misalignment_deg", f"{src} [init]") if "misalignment_deg" in init else None
     band = _num(data.get("metrics", {}), "settling_band_arcmin", f"{src} [metrics]", 1.0, 1e-6, 1e4)
     zoom = _num(data.get("metrics", {}), "zoom_from_s", f"{src} [metrics]", 100.0, 0.0, duration)
-    jump = None
-    if "jump_window_s" in data.get("metrics", {}):
-        jump = _vec(data["metrics"], "jump_window_s", f"{src} [metrics]", n=2)
-        if not 0 < jump[0] < jump[1] < duration:
-            raise ScenarioError(f"{_where(src, 'metrics.jump_window_s')}: expected 0 < start < end < duration_s, found {jump}")
-    win, amp_windows, compare = _window_metrics(data.get("metrics", {}), src, duration, methods)
+    try:
+        feats = features.parse_features(data, src, duration, methods)
+    except ValueError as exc:  # a feature's own message, as every scenario error: one line
+        raise ScenarioError(str(exc).splitlines()[0]) from None
     variants = data.get("variants", {})
     for vname, opts in variants.items():
         if not isinstance(opts, dict) or not isinstance(opts.get("method"), str):
             raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
-    paper = data.get("paper", {})
     experiment = data.get("experiment", "alignment")
     exp = _experiment(experiment, src)
     setup = {}
@@ -257,10 +232,11 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
             setup[key] = parser(data[key], src, duration)
         except ValueError as exc:
             raise ScenarioError(str(exc).splitlines()[0]) from None
-    kind = _kind(data, src, exp.kind, win is not None, bool(segs))
+    has_rmse_window = "rmse_window_s" in data.get("metrics", {})
+    kind = _kind(data, src, exp.kind, has_rmse_window, bool(segs))
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
-                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, paper, zoom, jump, win,
-                    amp_windows, compare, experiment, setup, src, kind, data)
+                    site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, zoom, feats,
+                    experiment, setup, src, kind, data)
 
 
 def _experiment(name, src):
