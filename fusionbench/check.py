@@ -8,10 +8,8 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
 * the fraction of runs that end inside that band (``settled_fraction_U``): new < ref - ABS_TOL_FRACTION;
 * level RMSE in the scenario's window (``window_rmse_arcmin``), where the reference has it: as the final error;
 * ``reduction_percent`` of a scenario comparing two methods: new < ref - ABS_TOL_PERCENT;
-* platform calibration (``groups`` in the reference): a group's largest |mean error| new > ref * (1 + REL_TOL)
-  (customary units). The information rank is not guarded: on a short scheme the singular values decay
-  through the rank tolerance without a gap (``--quick`` of paper002-rolling: the 32nd sits at 1e-12.0),
-  so the count is not a stable figure there;
+* the figures an experiment adds to metrics.json, by that experiment's own rules
+  (:meth:`fusionbench.experiment.Experiment.check`; a method family's experiment documents its own there);
 * a conformance matrix (``cells`` in the reference): a cell that passed must pass, and its azimuth efficiency
   must not grow beyond ref * (1 + REL_TOL) + ABS_TOL_EFFICIENCY;
 * a method of the reference missing from the run.
