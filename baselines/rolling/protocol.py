@@ -95,7 +95,7 @@ class Calibrator(Protocol):
     name : str
         Its registered name (the scenario's ``methods``).
     description : str
-        One line for ``fusionbench methods``.
+        One line for ``fusionbench list``.
     """
 
     name: str
