@@ -1,6 +1,6 @@
 """Seed 002's rolling self-calibration: wall time of the platform simulation and the 45-state EKF.
 
-Workload: the paper's torquing scheme (``fusionbench.platform.PAPER_SCHEME``: 0.1 deg/s about south
+Workload: the paper's torquing scheme (``baselines.rolling.scheme.PAPER_SCHEME``: 0.1 deg/s about south
 1800 s, east 900 s, south 1800 s, east 900 s; 5400 s, 2.7 M integration samples at 2 ms, an output
 every 0.2 s = 27 000 filter steps) at latitude 34 deg, sea level; paper noise (the ``simulate``
 defaults: 0.05 deg/h gyro white drift per 2-ms sample, 1 ug accelerometer noise per output). The true
@@ -8,7 +8,7 @@ coefficients of run r are row r of ``default_rng(2).normal(0, 0.3, (runs, 42)) *
 (zero mean, 0.3 x the EKF's prior standard deviation of each coefficient); the true initial angles
 are phi, theta, psi = 2, 3, 5 deg for every run. The simulator's noise seed is 0 (run r draws the r-th
 child stream of ``SeedSequence(0)``, whatever the batch size). The EKF is
-``baselines.rolling_ekf.RollingEKF()`` with its defaults (zero coefficients, attitude levelled from the
+``baselines.rolling.ekf.RollingEKF()`` with its defaults (zero coefficients, attitude levelled from the
 first second of outputs, azimuth 0; two passes).
 
 Measured, side by side in one invocation:
@@ -46,8 +46,11 @@ import time
 import numpy as np
 from joblib import Parallel, delayed
 
-from baselines.rolling_ekf import RollingEKF, prior_sigma
-from fusionbench import platform as pf
+from baselines.rolling import model
+from baselines.rolling.ekf import RollingEKF
+from baselines.rolling.priors import prior_sigma
+from baselines.rolling.scheme import PAPER_SCHEME, Scheme, Segment
+from baselines.rolling.simulator import simulate
 from fusionbench import units
 
 LAT = np.radians(34.0)
@@ -58,16 +61,16 @@ TARGET_S = 60.0
 GROUPS = ("D0", "D1", "D2", "GYRO_MOUNT", "K0", "K1", "K2", "ACCEL_MOUNT", "KT")
 
 
-def quick_scheme(base=pf.PAPER_SCHEME, factor=6):
+def quick_scheme(base=PAPER_SCHEME, factor=6):
     """``base`` with every segment 1/factor as long, rounded to whole command periods (at least one)."""
     T = base.command_period_s
-    segs = tuple(pf.Segment(s.axis, s.rate, max(1, round(s.duration / factor / T)) * T) for s in base.segments)
-    return pf.Scheme(segs, command_period_s=T, sample_s=base.sample_s, filter_s=base.filter_s)
+    segs = tuple(Segment(s.axis, s.rate, max(1, round(s.duration / factor / T)) * T) for s in base.segments)
+    return Scheme(segs, command_period_s=T, sample_s=base.sample_s, filter_s=base.filter_s)
 
 
 def true_coeffs(runs):
     rng = np.random.default_rng(COEFF_SEED)
-    return rng.normal(0.0, 0.3, (runs, pf.N_COEFFS)) * prior_sigma()[:pf.N_COEFFS]
+    return rng.normal(0.0, 0.3, (runs, model.N_COEFFS)) * prior_sigma()[:model.N_COEFFS]
 
 
 def ekf_run(t, y, w_cmd):
@@ -86,28 +89,28 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--runs", type=int, default=None, help="N of benchmarks 3 and 4 (default 4, --quick 2)")
     args = ap.parse_args()
-    scheme = quick_scheme() if args.quick else pf.PAPER_SCHEME
+    scheme = quick_scheme() if args.quick else PAPER_SCHEME
     runs = args.runs or (2 if args.quick else 4)
     if runs < 1:
         ap.error("--runs: expected a positive integer")
     cores = os.cpu_count() or 1
     coeffs = true_coeffs(runs)
-    C0 = pf.angles_to_dcm(ANGLES0)
+    C0 = model.angles_to_dcm(ANGLES0)
     print(f"seed-002 rolling self-calibration at 34 N: {scheme.duration:g} s scheme "
           f"({', '.join(f'{s.duration:g}' for s in scheme.segments)} s segments), {scheme.n_samples:,} samples "
           f"at {scheme.sample_s * 1e3:g} ms, {scheme.n_outputs:,} filter steps; N = {runs} runs, {cores} cores")
 
     # warm-up: both numba kernels (serial for runs=1, parallel for runs>1) compiled or loaded from cache
     t0 = time.perf_counter()
-    warm = pf.Scheme(((pf.Segment((0.0, -1.0, 0.0), 0.1 * units.DEG, 2.0)),))
-    pf.simulate(warm, coeffs[0], C0, LAT, seed=NOISE_SEED, runs=1)
-    pf.simulate(warm, coeffs[:2] if runs > 1 else np.stack([coeffs[0]] * 2), C0, LAT, seed=NOISE_SEED, runs=2)
+    warm = Scheme(((Segment((0.0, -1.0, 0.0), 0.1 * units.DEG, 2.0)),))
+    simulate(warm, coeffs[0], C0, LAT, seed=NOISE_SEED, runs=1)
+    simulate(warm, coeffs[:2] if runs > 1 else np.stack([coeffs[0]] * 2), C0, LAT, seed=NOISE_SEED, runs=2)
     RollingEKF().calibrate(np.arange(1, 11) * scheme.filter_s, np.tile([0.0, 9.8, 0.0], (10, 1)), np.zeros((10, 3)), LAT)
     warm_s = time.perf_counter() - t0
 
     # 1. one run simulated
     t0 = time.perf_counter()
-    one = pf.simulate(scheme, coeffs[0], C0, LAT, seed=NOISE_SEED, runs=1)
+    one = simulate(scheme, coeffs[0], C0, LAT, seed=NOISE_SEED, runs=1)
     sim_one = time.perf_counter() - t0
 
     # 2. the EKF on that run (two passes, the default), and its causal first pass alone
@@ -119,12 +122,12 @@ def main():
 
     # 3. N runs simulated: batched in one call against looped one by one
     t0 = time.perf_counter()
-    batch = pf.simulate(scheme, coeffs, C0, LAT, seed=NOISE_SEED, runs=runs)
+    batch = simulate(scheme, coeffs, C0, LAT, seed=NOISE_SEED, runs=runs)
     sim_batched = time.perf_counter() - t0
     t0 = time.perf_counter()
     looped_y0 = None
     for k in range(runs):
-        r = pf.simulate(scheme, coeffs[k], C0, LAT, seed=NOISE_SEED + k, runs=1)
+        r = simulate(scheme, coeffs[k], C0, LAT, seed=NOISE_SEED + k, runs=1)
         if k == 0:
             looped_y0 = r.y[0]
         del r
@@ -163,21 +166,21 @@ def main():
     # estimation error of run 0 (benchmark 2's filter), customary units
     sel = one.t >= one.t[-1] - 100.0  # CalibrationResult.final(): coefficients averaged over the last 100 s
     res_final = x0[sel].mean(axis=0)
-    res_final[pf.ANGLES] = x0[-1, pf.ANGLES]
-    err = pf.to_customary(res_final[:pf.N_COEFFS] - one.coeffs[0])
-    sig = pf.to_customary(s0[-1, :pf.N_COEFFS])
-    tru = pf.to_customary(one.coeffs[0])
+    res_final[model.ANGLES] = x0[-1, model.ANGLES]
+    err = model.to_customary(res_final[:model.N_COEFFS] - one.coeffs[0])
+    sig = model.to_customary(s0[-1, :model.N_COEFFS])
+    tru = model.to_customary(one.coeffs[0])
     print(f"run 0 estimation error after {scheme.duration:g} s (coefficients: mean of the last 100 s)")
     print(f"{'group':<12} {'unit':<10} {'max |err|':>10} {'max sigma':>10} {'max |true|':>10} {'max |err|/sigma':>16}")
     groups = {}
     for name in GROUPS:
-        sl = getattr(pf, name)
+        sl = getattr(model, name)
         e, s = np.abs(err[sl]), sig[sl]
         groups[name] = {"max_abs_err": float(e.max()), "max_sigma": float(s.max())}
-        print(f"{name:<12} {pf.COEFF_CUSTOMARY_UNITS[sl.start]:<10} {e.max():10.4g} {s.max():10.4g} "
+        print(f"{name:<12} {model.COEFF_CUSTOMARY_UNITS[sl.start]:<10} {e.max():10.4g} {s.max():10.4g} "
               f"{np.abs(tru[sl]).max():10.4g} {np.max(e / s):16.2f}")
-    a_err = wrap(res_final[pf.ANGLES] - one.states[0, -1, pf.ANGLES]) / units.ARCSEC
-    a_sig = s0[-1, pf.ANGLES] / units.ARCSEC
+    a_err = wrap(res_final[model.ANGLES] - one.states[0, -1, model.ANGLES]) / units.ARCSEC
+    a_sig = s0[-1, model.ANGLES] / units.ARCSEC
     print("angles at the end, arcsec: " + ", ".join(f"{n} {e:+.2f} (sigma {s:.2f})"
                                                    for n, e, s in zip(("phi", "theta", "psi"), a_err, a_sig)))
 

@@ -11,9 +11,8 @@ A figure regresses when it is worse than the reference beyond the tolerance (imp
   (:meth:`fusionbench.experiment.Experiment.check`, :meth:`fusionbench.features.Feature.check`): the level RMSE
   in a window as the final error (``window_rmse_arcmin``); a comparison's ``reduction_percent``: new < ref -
   ABS_TOL_PERCENT; a conformance matrix's cells: a cell that passed must pass, its azimuth efficiency not beyond
-  ref * (1 + REL_TOL) + ABS_TOL_EFFICIENCY; a platform calibration's coefficient groups: the largest |mean error|
-  not beyond ref * (1 + REL_TOL) (the information rank is not guarded: on a short scheme the singular values
-  decay through the rank tolerance without a gap, so the count is not a stable figure there).
+  ref * (1 + REL_TOL) + ABS_TOL_EFFICIENCY; a family's experiment
+  documents its own there (e.g. a platform calibration's coefficient groups).
 
 Where the tolerance comes from: the same scenario, seed and size give identical numbers on one machine, so
 the Monte Carlo sampling noise cancels between a run and its reference. What remains across platforms and

@@ -4,9 +4,9 @@ A scenario file names its experiment (``experiment = "..."``, default ``alignmen
 file, runs the Monte Carlo, writes metrics.json and report.md, and gives the check rules of the figures it adds.
 Experiments are found by name in the entry-point group ``fusionbench.experiments``, like methods: the core's
 own (``alignment``: IMU data to aligners, :mod:`fusionbench.alignment`; ``conformance``: the method x
-condition matrix, :mod:`fusionbench.conformance`) are registered in pyproject.toml exactly as a family's are
-(seed 002's ``platform-rolling`` lives in ``baselines``). Adding an experiment kind is one module with a class
-following :class:`Experiment` and one line of registration; the runner, report and check do not change.
+condition matrix, :mod:`fusionbench.conformance`) are registered in pyproject.toml exactly as a family's are (a
+method family's own experiment lives in the family's package). Adding an experiment kind is one module with a
+class following :class:`Experiment` and one line of registration; the runner, report and check do not change.
 
 The data path of every experiment: scenario file -> :meth:`Experiment.load` -> :meth:`Experiment.run` (an
 outcome with ``scenario`` and ``metrics``: the metrics.json mapping) -> :meth:`Experiment.write_report`

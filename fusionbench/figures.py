@@ -251,7 +251,7 @@ class Event:
 def scenario_events(scn, duration_s):
     """Events of a scenario: noise schedules of the IMU and of the velocity reference, the jump window of
     the metrics, the motion segments (a manoeuvre) and the experiment's own (its optional
-    ``events(scn, duration_s)``, e.g. the segments of a platform's rolling scheme)."""
+    ``events(scn, duration_s)``, e.g. the segments of a scheme the experiment runs through)."""
     ev = []
     for s in getattr(scn.imu_spec, "schedules", ()):
         who = "IMU" if set(s.sensors) == {"gyro", "accel"} else "+".join(s.sensors)
@@ -269,7 +269,7 @@ def scenario_events(scn, duration_s):
                 ev.append(Event(t, t + seg.duration, f"manoeuvre, {np.linalg.norm(a):.3g} m/s^2"))
             t += seg.duration
     exp = load_experiment(getattr(scn, "experiment", "alignment"))
-    if hasattr(exp, "events"):  # the experiment's own phases (e.g. a platform's roll phases)
+    if hasattr(exp, "events"):  # the experiment's own phases
         ev += exp.events(scn, duration_s)
     return ev
 

@@ -21,15 +21,18 @@ from pathlib import Path
 
 import pytest
 
-from fusionbench import aligner, calibration, conformance, imu, scenarios, units
-from fusionbench import platform as pf
+from baselines.rolling import experiment as rolling_experiment
+from baselines.rolling import model as rolling_model
+from baselines.rolling import scheme as rolling_scheme
+from baselines.rolling import spec as rolling_spec
+from fusionbench import aligner, conformance, imu, scenarios, units
 from fusionbench.experiment import available_experiments, load_experiment
 from fusionbench.features import compare as feat_compare, jump as feat_jump, paper as feat_paper, windows as feat_windows
 
 ROOT = Path(__file__).parents[1]
 DOC_PATH = ROOT / "docs" / "scenarios.md"
 DOC = DOC_PATH.read_text()
-PARSERS = (scenarios, imu, conformance, calibration, feat_jump, feat_windows, feat_compare, feat_paper)
+PARSERS = (scenarios, imu, conformance, rolling_spec, feat_jump, feat_windows, feat_compare, feat_paper)
 
 
 # ----------------------------------------------------------------------------------------------- the page, read
@@ -97,8 +100,8 @@ def parser_keys():
     """Every key a parser accepts: the key-set constants, plus every set of strings written in a parser's source
     (the inline key sets: a segment's, a schedule's, a scheme segment's, the conformance sub-tables')."""
     keys = (set(scenarios._TOP) | set().union(*scenarios.sections().values()) | set(imu.SPEC_KEYS)
-            | set(conformance._TOP) | set(conformance._CONDITION_KEYS) | set(calibration.PLATFORM_KEYS)
-            | set(calibration._GROUP_KEYS) | set(calibration.PlatformRolling.tables) | {"method"})  # a [variants.NAME] table's own key (the rest are options)
+            | set(conformance._TOP) | set(conformance._CONDITION_KEYS) | set(rolling_spec.PLATFORM_KEYS)
+            | set(rolling_spec.GROUP_KEYS) | set(rolling_experiment.PlatformRolling.tables) | {"method"})  # a [variants.NAME] table's own key (the rest are options)
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
             if isinstance(node, ast.Set):
@@ -109,7 +112,7 @@ def parser_keys():
 def parser_values():
     """The names a parser accepts as values: kinds, experiments, presets, bases, axes, and inline ``choices``."""
     values = (set(scenarios.KINDS) | set(available_experiments()) | set(imu.PRESETS) | set(conformance.BASES)
-              | set(calibration._AXES) | set(imu._SENSORS))
+              | set(rolling_scheme.AXES) | set(imu._SENSORS))
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
             if isinstance(node, ast.keyword) and node.arg == "choices":
@@ -309,11 +312,11 @@ def test_override_units_are_the_key_suffixes_the_page_names():
 
 def test_platform_groups_table_is_the_model():
     rows = _rows(SECTIONS["Coefficient groups"])
-    assert set(rows) == set(calibration._GROUP_KEYS)
-    for name, sl in calibration._GROUP_KEYS.items():
+    assert set(rows) == set(rolling_spec.GROUP_KEYS)
+    for name, sl in rolling_spec.GROUP_KEYS.items():
         count, unit = rows[name][1], rows[name][2]
         assert int(count) == sl.stop - sl.start, name
-        assert unit == pf.COEFF_CUSTOMARY_UNITS[sl.start], name
+        assert unit == rolling_model.COEFF_CUSTOMARY_UNITS[sl.start], name
 
 
 # ---------------------------------------------------------------------------------------- the examples

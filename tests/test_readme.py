@@ -35,7 +35,7 @@ def test_readme_platform_example_runs_and_meets_its_bound(capsys):
     ns = _run_block("information_rank")
     assert "rank 45" in capsys.readouterr().out
     # the torquer errors within 3 of the filter's sigmas, and those within 2 of the information bound
-    pf = ns["pf"]
-    sig = pf.to_customary(ns["res"].sigma[-1, :42])[pf.KT]
-    bound = pf.to_customary(ns["bound"][:42])[pf.KT]
-    assert np.all(np.abs(ns["err"][pf.KT]) < 3 * sig) and np.all(sig < 2 * bound)
+    model = ns["model"]
+    sig = model.to_customary(ns["res"].sigma[-1, :42])[model.KT]
+    bound = model.to_customary(ns["bound"][:42])[model.KT]
+    assert np.all(np.abs(ns["err"][model.KT]) < 3 * sig) and np.all(sig < 2 * bound)

@@ -6,16 +6,20 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from baselines import rolling_ekf as R
-from fusionbench import platform as pf
+from baselines.rolling import ekf as R
+from baselines.rolling import jacobians, model
+from baselines.rolling import kernels as K
+from baselines.rolling.priors import prior_sigma
+from baselines.rolling.scheme import PAPER_SCHEME, Scheme
+from baselines.rolling.simulator import simulate
 
 LAT = np.radians(34.0)
 
 
 def _state(seed, angles_deg):
     rng = np.random.default_rng(seed)
-    x = rng.normal(0.0, 0.3, pf.N_STATES) * R.prior_sigma()
-    x[pf.ANGLES] = np.radians(angles_deg)
+    x = rng.normal(0.0, 0.3, model.N_STATES) * prior_sigma()
+    x[model.ANGLES] = np.radians(angles_deg)
     return x
 
 
@@ -32,10 +36,10 @@ def _central(fun, x, steps):
 def test_jacobians_match_central_differences(angles):
     x = _state(1, angles)
     w = np.radians([0.1, -0.05, 0.02])
-    steps = 1e-4 * R.prior_sigma()
-    Hn = _central(lambda s: pf.measurement(s, LAT), x, steps)
-    Fn = _central(lambda s: pf.state_derivative(s, w, LAT), x, steps)
-    H, F = R.jacobian_h(x, LAT), R.jacobian_f(x, w, LAT)
+    steps = 1e-4 * prior_sigma()
+    Hn = _central(lambda s: model.measurement(s, LAT), x, steps)
+    Fn = _central(lambda s: model.state_derivative(s, w, LAT), x, steps)
+    H, F = jacobians.jacobian_h(x, LAT), jacobians.jacobian_f(x, w, LAT)
     # relative to each column's largest entry: the differences are second-order accurate (1e-8 measured)
     for A, An in ((H, Hn), (F, Fn)):
         scale = np.maximum(np.abs(An).max(axis=0), 1e-300)
@@ -49,41 +53,41 @@ def test_error_state_jacobians_match_central_differences():
     from scipy.spatial.transform import Rotation
     x = _state(1, (20.0, 3.0, -40.0))
     w = np.radians([0.1, -0.05, 0.02])
-    F, H = R.error_jacobians(x, w, LAT)
-    sig = R.prior_sigma()
+    F, H = jacobians.error_jacobians(x, w, LAT)
+    sig = prior_sigma()
     dt = 0.01  # long enough that the propagated misalignment stands well above rounding
 
     def eta_after(e):
-        xt, xe = R._rk4(R.K.inject(x, e), w, dt, LAT, 0.0), R._rk4(x, w, dt, LAT, 0.0)
-        Ct, Ce = pf.angles_to_dcm(xt[pf.ANGLES]), pf.angles_to_dcm(xe[pf.ANGLES])
+        xt, xe = R._rk4(K.inject(x, e), w, dt, LAT, 0.0), R._rk4(x, w, dt, LAT, 0.0)
+        Ct, Ce = model.angles_to_dcm(xt[model.ANGLES]), model.angles_to_dcm(xe[model.ANGLES])
         return -Rotation.from_matrix(Ct @ Ce.T).as_rotvec()
 
-    for i in range(pf.N_STATES):
-        e = np.zeros(pf.N_STATES)
+    for i in range(model.N_STATES):
+        e = np.zeros(model.N_STATES)
         e[i] = 1e-4 * sig[i]
-        col = (pf.measurement(R.K.inject(x, e), LAT) - pf.measurement(R.K.inject(x, -e), LAT)) / (2 * e[i])
+        col = (model.measurement(K.inject(x, e), LAT) - model.measurement(K.inject(x, -e), LAT)) / (2 * e[i])
         assert np.abs(col - H[:, i]).max() <= 1e-6 * np.abs(H).max()  # the azimuth column: rounding only
         e[i] = 1e-2 * sig[i]
         d = (eta_after(e) - eta_after(-e)) / (2 * e[i])
-        expect = (np.eye(pf.N_STATES)[i, pf.ANGLES] if i >= pf.N_COEFFS else 0.0) + F[pf.ANGLES, i] * dt
-        assert np.abs(d - expect).max() <= max(1e-3 * np.abs(F[pf.ANGLES, i] * dt).max(), 1e-12)
+        expect = (np.eye(model.N_STATES)[i, model.ANGLES] if i >= model.N_COEFFS else 0.0) + F[model.ANGLES, i] * dt
+        assert np.abs(d - expect).max() <= max(1e-3 * np.abs(F[model.ANGLES, i] * dt).max(), 1e-12)
     # a rotation about the vertical is invisible to the accelerometers, whatever the estimate
-    assert np.abs(H[:, pf.N_COEFFS + 2]).max() < 1e-12
+    assert np.abs(H[:, model.N_COEFFS + 2]).max() < 1e-12
 
 
 def test_filter_started_on_the_truth_of_a_noise_free_run_stays_on_it():
-    c = _state(2, (0.0, 0.0, 0.0))[:pf.N_COEFFS]  # the filter's model is the simulator's (exact G^-1)
+    c = _state(2, (0.0, 0.0, 0.0))[:model.N_COEFFS]  # the filter's model is the simulator's (exact G^-1)
     a0 = np.radians([2.0, 3.0, 5.0])
-    scheme = pf.Scheme(tuple(pf.PAPER_SCHEME.segments[:2]))  # south 1800 s, east 900 s
-    run = pf.simulate(scheme, c, pf.angles_to_dcm(a0), LAT, gyro_noise=0.0, accel_noise=0.0)
+    scheme = Scheme(tuple(PAPER_SCHEME.segments[:2]))  # south 1800 s, east 900 s
+    run = simulate(scheme, c, model.angles_to_dcm(a0), LAT, gyro_noise=0.0, accel_noise=0.0)
     res = R.RollingEKF().calibrate(run.t[:2000], run.y[0, :2000], run.w_cmd[0, :2000], LAT,
                                    x0=np.concatenate([c, a0]))
     err = res.x - run.states[0, :2000]
     # same model, no noise: the estimate stays on the truth to rounding (6e-5 arcsec measured)
-    assert np.max(np.abs(err[:, pf.ANGLES])) < 1e-3 * np.radians(1 / 3600)
+    assert np.max(np.abs(err[:, model.ANGLES])) < 1e-3 * np.radians(1 / 3600)
     # no process noise on the coefficients: their sigmas only shrink (the angles' may grow, rotating
     # the poorly observed azimuth uncertainty into the other angles)
-    assert np.all(np.diff(res.sigma[:, :pf.N_COEFFS], axis=0) <= 1e-12 * res.sigma[:-1, :pf.N_COEFFS])
+    assert np.all(np.diff(res.sigma[:, :model.N_COEFFS], axis=0) <= 1e-12 * res.sigma[:-1, :model.N_COEFFS])
 
 
 def test_bad_input_is_named():
@@ -102,21 +106,21 @@ def test_noise_free_paper_run_recovers_every_coefficient_within_one_percent():
     its torquer and gyro axis-angle errors are tens of ppm and arcseconds (R inflated while the attitude
     is degrees off), which is why the second pass exists."""
     from fusionbench import scenarios
-    from fusionbench.calibration import draw_truth
+    from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
     c, a = draw_truth(scn.setup["platform"], 0, 0)
-    run = pf.simulate(scn.setup["platform"].scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    run = simulate(scn.setup["platform"].scheme, c, model.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(passes=2).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     est = res.final()
-    assert np.all(np.abs(est[:pf.N_COEFFS] - c) < 0.01 * np.abs(c))
+    assert np.all(np.abs(est[:model.N_COEFFS] - c) < 0.01 * np.abs(c))
     arcsec = np.radians(1 / 3600)
-    misalign = Rotation.from_matrix(pf.angles_to_dcm(est[pf.ANGLES]) @ run.C_pn[0, -1].T).magnitude()
+    misalign = Rotation.from_matrix(model.angles_to_dcm(est[model.ANGLES]) @ run.C_pn[0, -1].T).magnitude()
     assert misalign < 0.1 * arcsec
     # a noise-free run sits well inside the filter's own sigmas (0.06 of them measured)
-    assert np.max(np.abs(est[:pf.N_COEFFS] - c) / res.sigma[-1, :pf.N_COEFFS]) < 0.5
+    assert np.max(np.abs(est[:model.N_COEFFS] - c) / res.sigma[-1, :model.N_COEFFS]) < 0.5
     first = res.first_pass.final()
-    assert np.max(np.abs(first[pf.KT] - c[pf.KT])) > 100 * np.max(np.abs(est[pf.KT] - c[pf.KT]))
+    assert np.max(np.abs(first[model.KT] - c[model.KT])) > 100 * np.max(np.abs(est[model.KT] - c[model.KT]))
 
 
 def test_backward_undoes_the_forward_model():
@@ -125,13 +129,13 @@ def test_backward_undoes_the_forward_model():
     x = x0
     for k in range(500):
         x = R._rk4(x, w[k], 0.2, LAT, 0.0)
-    assert np.abs(x[pf.ANGLES] - x0[pf.ANGLES]).max() > np.radians(1.0)  # it moved
+    assert np.abs(x[model.ANGLES] - x0[model.ANGLES]).max() > np.radians(1.0)  # it moved
     back = R.backward(x, w, 0.2, LAT)
     assert np.abs(back - x0).max() < 1e-12
 
 
 def test_compiled_kernels_match_the_platform_model():
-    """The filter's compiled evaluations (baselines.rolling_kernels) against the NumPy platform model and
+    """The filter's compiled evaluations (baselines.rolling.kernels) against the NumPy platform model and
     scipy's rotations, on states with large angles and coefficients."""
     from scipy.spatial.transform import Rotation as Rot
 
@@ -140,43 +144,43 @@ def test_compiled_kernels_match_the_platform_model():
     for seed, ang in ((4, (20.0, -35.0, 150.0)), (5, (-170.0, 80.0, -10.0))):
         x = _state(seed, ang)
         w = np.radians([0.1, -0.05, 0.02])
-        C = pf.angles_to_dcm(x[pf.ANGLES])
-        assert np.abs(R.K.dcm(x[pf.ANGLES]) - C).max() < 1e-15
-        assert np.abs(R.K.angles(C) - pf.dcm_to_angles(C)).max() < 1e-14
-        assert np.abs(R.K.measurement(x, g) - pf.model.measurement_unchecked(x, g)).max() < 1e-15
-        ref = pf.model.state_derivative_unchecked(x, w, g, wie)[pf.ANGLES]
-        assert np.abs(R.K.angle_derivative(x, w, g, wie) - ref).max() < 1e-18
-        e = 1e-3 * np.random.default_rng(seed).standard_normal(pf.N_STATES)
-        out = R.K.inject(x, e)
-        C_ref = Rot.from_rotvec(-e[pf.ANGLES]).as_matrix() @ C
-        assert np.abs(pf.angles_to_dcm(out[pf.ANGLES]) - C_ref).max() < 1e-15
-        assert np.abs(out[pf.ANGLES] - x[pf.ANGLES]).max() < 0.1  # continuous: no jump of 2 pi (at theta 80 deg
+        C = model.angles_to_dcm(x[model.ANGLES])
+        assert np.abs(K.dcm(x[model.ANGLES]) - C).max() < 1e-15
+        assert np.abs(K.angles(C) - model.dcm_to_angles(C)).max() < 1e-14
+        assert np.abs(K.measurement(x, g) - model.measurement_unchecked(x, g)).max() < 1e-15
+        ref = model.state_derivative_unchecked(x, w, g, wie)[model.ANGLES]
+        assert np.abs(K.angle_derivative(x, w, g, wie) - ref).max() < 1e-18
+        e = 1e-3 * np.random.default_rng(seed).standard_normal(model.N_STATES)
+        out = K.inject(x, e)
+        C_ref = Rot.from_rotvec(-e[model.ANGLES]).as_matrix() @ C
+        assert np.abs(model.angles_to_dcm(out[model.ANGLES]) - C_ref).max() < 1e-15
+        assert np.abs(out[model.ANGLES] - x[model.ANGLES]).max() < 0.1  # continuous: no jump of 2 pi (at theta 80 deg
         # the angles move up to 1 / cos(theta) times the 2e-3 rad turn)
-        assert np.array_equal(out[:pf.N_COEFFS], x[:pf.N_COEFFS] + e[:pf.N_COEFFS])
+        assert np.array_equal(out[:model.N_COEFFS], x[:model.N_COEFFS] + e[:model.N_COEFFS])
 
 
 def test_second_pass_reaches_the_information_bound():
     """Without process noise the second pass is a linear Kalman filter, so its final coefficient sigmas
     are the inverse of prior + information: equal to ``bound()`` (1.0000 measured). That bound in turn
     agrees with the scheme's PWCS information matrix computed independently along the commanded path
-    (baselines.rolling_observability, expm per step) to 3.4 % (the paths differ by the truths' drift)."""
+    (baselines.rolling.observability, expm per step) to 3.4 % (the paths differ by the truths' drift)."""
     from fusionbench import scenarios
-    from fusionbench.calibration import draw_truth
-    from baselines.rolling_observability import information_matrix
+    from baselines.rolling.spec import draw_truth
+    from baselines.rolling.observability import information_matrix
 
     scn = scenarios.get("paper002-rolling")
     spec = scn.setup["platform"].scaled(1800.0)
     c, a = draw_truth(spec, 0, 0)
-    run = pf.simulate(spec.scheme, c, pf.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    run = simulate(spec.scheme, c, model.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(gyro_noise=0.0).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
-    bound = res.bound()[:pf.N_COEFFS]
-    assert np.abs(res.sigma[-1, :pf.N_COEFFS] / bound - 1.0).max() < 1e-3
-    M = information_matrix(spec.scheme, scn.site.lat, C0=pf.angles_to_dcm(a), coeffs=c, step_s=spec.scheme.filter_s)
-    pwcs = R.prior_sigma() * np.sqrt(np.diag(np.linalg.inv(np.eye(pf.N_STATES) + M)))
-    assert np.abs(bound / pwcs[:pf.N_COEFFS] - 1.0).max() < 0.05
+    bound = res.bound()[:model.N_COEFFS]
+    assert np.abs(res.sigma[-1, :model.N_COEFFS] / bound - 1.0).max() < 1e-3
+    M = information_matrix(spec.scheme, scn.site.lat, C0=model.angles_to_dcm(a), coeffs=c, step_s=spec.scheme.filter_s)
+    pwcs = prior_sigma() * np.sqrt(np.diag(np.linalg.inv(np.eye(model.N_STATES) + M)))
+    assert np.abs(bound / pwcs[:model.N_COEFFS] - 1.0).max() < 0.05
     # the gyros' white drift (paper level) raises the sigmas above that bound, by up to 40 % here
     noisy = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
-    ratio = noisy.sigma[-1, :pf.N_COEFFS] / noisy.bound()[:pf.N_COEFFS]
+    ratio = noisy.sigma[-1, :model.N_COEFFS] / noisy.bound()[:model.N_COEFFS]
     assert ratio.min() > 0.999 and ratio.max() > 1.1
 
 
@@ -185,15 +189,15 @@ def test_auto_passes_iterate_until_the_linearisation_point_is_the_answer():
     (1682 measured on this draw), because the first pass ends outside the linear range; passes="auto"
     keeps relinearising (5 passes here) and lands within 4 sigmas (2.2 measured)."""
     from fusionbench import scenarios
-    from fusionbench.calibration import draw_truth
+    from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
     c, a = draw_truth(scn.setup["platform"], 0, 2)
     a[1] = np.radians(10.0)
-    run = pf.simulate(scn.setup["platform"].scheme, c, pf.angles_to_dcm(a), scn.site.lat, seed=12)
+    run = simulate(scn.setup["platform"].scheme, c, model.angles_to_dcm(a), scn.site.lat, seed=12)
     two = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     auto = R.RollingEKF(passes="auto").calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
-    z = lambda res: np.max(np.abs(res.final()[:pf.N_COEFFS] - c) / res.sigma[-1, :pf.N_COEFFS])  # noqa: E731
+    z = lambda res: np.max(np.abs(res.final()[:model.N_COEFFS] - c) / res.sigma[-1, :model.N_COEFFS])  # noqa: E731
     assert two.figures["passes"] == 2 and z(two) > 20
     assert 3 <= auto.figures["passes"] <= R.AUTO_MAX_PASSES and z(auto) < 4
     assert two.figures["last_pass_move_sigma"] > 20

@@ -1,27 +1,30 @@
-"""Observability of rolling schemes (baselines.rolling_observability): rank, null spaces, sensitivity."""
+"""Observability of rolling schemes (baselines.rolling.observability): rank, null spaces, sensitivity."""
 
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from baselines import rolling_observability as ro
-from baselines.rolling_ekf import error_jacobians, prior_sigma
+from baselines.rolling import model
+from baselines.rolling import observability as ro
+from baselines.rolling.jacobians import error_jacobians
+from baselines.rolling.priors import prior_sigma
+from baselines.rolling.scheme import PAPER_SCHEME, Scheme, commanded_path, commands
+from baselines.rolling.simulator import simulate
 from fusionbench import earth
-from fusionbench import platform as pf
 
 LAT = np.radians(40.0)
 RATE = np.radians(0.1)
 SOUTH = (0.0, -1.0, 0.0)
 EAST = (1.0, 0.0, 0.0)
-SINGLE_AXIS = pf.Scheme(((SOUTH, RATE, 5400.0),))
-STATIC = pf.Scheme(((EAST, 0.0, 600.0),))
+SINGLE_AXIS = Scheme(((SOUTH, RATE, 5400.0),))
+STATIC = Scheme(((EAST, 0.0, 600.0),))
 D = prior_sigma()
 IDX = {n: i for i, n in enumerate(ro.ERROR_STATE_NAMES)}
 
 
 @pytest.fixture(scope="module")
 def m_paper():
-    return ro.information_matrix(pf.PAPER_SCHEME, LAT)
+    return ro.information_matrix(PAPER_SCHEME, LAT)
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +93,7 @@ def test_information_matrix_is_symmetric_psd_and_scales_with_the_prior(m_paper):
     assert np.array_equal(m_paper, m_paper.T)
     lam = np.linalg.eigvalsh(m_paper)
     assert lam[0] > -1e-12 * lam[-1]
-    scheme = pf.Scheme(((SOUTH, RATE, 200.0), (EAST, RATE, 200.0)))
+    scheme = Scheme(((SOUTH, RATE, 200.0), (EAST, RATE, 200.0)))
     ms = ro.information_matrix(scheme, LAT)
     mu = ro.information_matrix(scheme, LAT, scaled=False)
     # unscaled M = D^-1 M_z D^-1, compared entry by entry relative to sqrt(M_ii M_jj)
@@ -100,7 +103,7 @@ def test_information_matrix_is_symmetric_psd_and_scales_with_the_prior(m_paper):
 
 
 def test_information_grows_along_the_scheme(m_paper):
-    half = pf.Scheme(pf.PAPER_SCHEME.segments[:2])  # first 2700 s
+    half = Scheme(PAPER_SCHEME.segments[:2])  # first 2700 s
     m_half = ro.information_matrix(half, LAT)
     lam = np.linalg.eigvalsh(m_paper - m_half)
     assert lam[0] >= -1e-9 * np.abs(lam).max()
@@ -111,13 +114,13 @@ def test_information_grows_along_the_scheme(m_paper):
 def test_matches_the_plain_definition_with_full_45x45_exponentials():
     # independent computation of M = sum Phi(t_k,0)^T H_k^T R^-1 H_k Phi(t_k,0) with expm of the full F_k,
     # at non-zero nominal coefficients (the drift Jacobian then varies with the attitude)
-    scheme = pf.Scheme(((SOUTH, RATE, 30.0), (EAST, RATE, 30.0)))
-    coeffs = pf.coeff_vector(True, D0_X=1.0, DI_Y=0.5, DO_Z=0.5, DIO_X=0.2, G_XY=30.0, KT_Z=100.0, K1_X=50.0)
-    C0 = pf.angles_to_dcm([0.1, 0.02, -0.3])
+    scheme = Scheme(((SOUTH, RATE, 30.0), (EAST, RATE, 30.0)))
+    coeffs = model.coeff_vector(True, D0_X=1.0, DI_Y=0.5, DO_Z=0.5, DIO_X=0.2, G_XY=30.0, KT_Z=100.0, K1_X=50.0)
+    C0 = model.angles_to_dcm([0.1, 0.02, -0.3])
     t = np.arange(61.0)
-    ang = pf.dcm_to_angles(pf.commanded_path(scheme, C0, t))
-    cmd = pf.commands(scheme, C0, LAT)
-    r2 = pf.PAPER_ACCEL_NOISE ** 2
+    ang = model.dcm_to_angles(commanded_path(scheme, C0, t))
+    cmd = commands(scheme, C0, LAT)
+    r2 = model.PAPER_ACCEL_NOISE ** 2
     P, M = np.eye(45), np.zeros((45, 45))
     for k in range(60):
         F, _ = error_jacobians(np.concatenate([coeffs, ang[k]]), cmd[k], LAT)
@@ -130,7 +133,7 @@ def test_matches_the_plain_definition_with_full_45x45_exponentials():
 
 
 def test_accelerometer_bias_appears_one_to_one():
-    t, S = ro.sensitivity_curves(pf.PAPER_SCHEME, LAT)
+    t, S = ro.sensitivity_curves(PAPER_SCHEME, LAT)
     assert t.shape == (5400,) and S.shape == (5400, 3, 45)
     assert t[0] == 1.0 and t[-1] == 5400.0
     j = IDX["K0_X"]
@@ -139,14 +142,14 @@ def test_accelerometer_bias_appears_one_to_one():
 
 
 def test_sensitivity_matches_the_nonlinear_simulator():
-    # independent: half a prior sigma of a coefficient in pf.simulate (exact G^-1, RK4 at 2 ms, no noise)
+    # independent: half a prior sigma of a coefficient in simulate (exact G^-1, RK4 at 2 ms, no noise)
     # changes the outputs by half the sensitivity curve (measured within 0.15 %)
-    scheme = pf.Scheme(((SOUTH, RATE, 300.0), (EAST, RATE, 300.0)))
+    scheme = Scheme(((SOUTH, RATE, 300.0), (EAST, RATE, 300.0)))
     names = ["D0_X", "G_XY", "KT_Z", "DO_Y"]
     c = np.zeros((len(names) + 1, 42))
     for r, n in enumerate(names):
         c[r + 1, IDX[n]] = 0.5 * D[IDX[n]]
-    run = pf.simulate(scheme, c, pf.angles_to_dcm(np.zeros(3)), LAT, gyro_noise=0.0, accel_noise=0.0)
+    run = simulate(scheme, c, model.angles_to_dcm(np.zeros(3)), LAT, gyro_noise=0.0, accel_noise=0.0)
     t, S = ro.sensitivity_curves(scheme, LAT)
     sel = np.isclose(run.t % 1.0, 0.0) | np.isclose(run.t % 1.0, 1.0)
     np.testing.assert_allclose(run.t[sel], t)
@@ -166,7 +169,7 @@ def test_weakest_directions_of_a_full_rank_scheme(m_paper):
 
 
 def test_figure_is_written(tmp_path):
-    scheme = pf.Scheme(((SOUTH, RATE, 120.0), (EAST, RATE, 60.0)))
+    scheme = Scheme(((SOUTH, RATE, 120.0), (EAST, RATE, 60.0)))
     t, S = ro.sensitivity_curves(scheme, LAT)
     path = ro.sensitivity_figure(t, S, path=tmp_path / "sens.png")
     data = (tmp_path / "sens.png").read_bytes()

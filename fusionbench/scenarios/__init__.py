@@ -5,7 +5,7 @@ same form. Every file is validated on load; an error names the file and the fiel
 
 The format, every key with its type, unit, default and allowed range (``[quick]``, ``[site]``, ``[attitude]``,
 ``[motion]``, ``[imu]`` with its presets, datasheet-unit overrides and noise schedules, ``[vref]``, ``[init]``,
-``[metrics]``, ``[variants.NAME]``, ``[paper]``, ``[platform]`` and the conformance-matrix file), is
+``[metrics]``, ``[variants.NAME]``, ``[paper]``, the tables an experiment adds and the conformance-matrix file), is
 docs/scenarios.md; tests/test_docs.py keeps it in step with :func:`parse`. In short: angles in degrees, times in
 s, sensor figures in the datasheet units named in the key (``gyro_bias_dph``, ``arw_dpsh``, ``vrw_ug_rthz``)::
 
@@ -38,9 +38,10 @@ _TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods
 #: ``alignment`` (a stationary or swaying base: the theoretical limits and the settling band apply);
 #: ``moving-alignment`` (a vehicle under way with a velocity reference: the stationary limits do not apply,
 #: the error is scored against the truth); ``navigation`` (free-inertial navigation from a given attitude over
-#: hours, e.g. Schuler damping: no limit, no settling band); ``calibration`` (platform self-calibration) and
-#: ``conformance`` (the method x condition matrix). Inferred when a file gives none: from ``experiment``, then
-#: ``navigation`` when [metrics] has rmse_window_s, ``moving-alignment`` when [motion] has segments.
+#: hours, e.g. Schuler damping: no limit, no settling band); ``calibration`` (self-calibration of error
+#: coefficients) and ``conformance`` (the method x condition matrix). Inferred when a file gives none: from
+#: ``experiment``, then ``navigation`` when [metrics] has rmse_window_s, ``moving-alignment`` when [motion] has
+#: segments.
 KINDS = ("alignment", "moving-alignment", "navigation", "calibration", "conformance")
 _SECTIONS = {
     "quick": {"duration_s", "runs"},

@@ -1,11 +1,13 @@
 """Platform error model: coefficients and their units, attitude angles, drift, platform rate, accelerometer
-outputs, and the filter's f(x) and h(x) (equations in :mod:`fusionbench.platform`)."""
+outputs, and the filter's f(x) and h(x) (equations in the :mod:`baselines.rolling` module notes)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .. import earth, units
+from fusionbench import earth, units
+
+from .terms import accel_terms, dcm_terms, drift_terms, rate_terms
 
 # --------------------------------------------------------------------------------------------------
 # constants, names and units
@@ -160,17 +162,9 @@ def angles_to_dcm(angles):
 
 def _angles_dcm(a):
     """:func:`angles_to_dcm` without input checks (for the filter's inner loop)."""
-    M = np.stack(_dcm_terms(np.sin(a[..., 0]), np.cos(a[..., 0]), np.sin(a[..., 1]), np.cos(a[..., 1]),
-                            np.sin(a[..., 2]), np.cos(a[..., 2])), axis=-1).reshape(a.shape[:-1] + (3, 3))
+    M = np.stack(dcm_terms(np.sin(a[..., 0]), np.cos(a[..., 0]), np.sin(a[..., 1]), np.cos(a[..., 1]),
+                           np.sin(a[..., 2]), np.cos(a[..., 2])), axis=-1).reshape(a.shape[:-1] + (3, 3))
     return P_NUE.T @ M
-
-
-def _dcm_terms(sf, cf, st, ct, ss, cs):
-    """The nine entries (row-major) of ``M = Rx(phi) Ry(theta) Rz(psi)`` from the angles' sines and cosines;
-    ``C_pn = P_NUE^T M`` (rows E, N, U = M's rows 2, 0, 1). Plain arithmetic (NumPy or compiled)."""
-    return (ct * cs, -ct * ss, st,
-            cf * ss + sf * st * cs, cf * cs - sf * st * ss, -sf * ct,
-            sf * ss - cf * st * cs, sf * cs + cf * st * ss, cf * ct)
 
 
 def dcm_to_angles(C_pn):
@@ -215,41 +209,12 @@ def angle_rates(angles, w_np_p):
 
 def _angle_rates(a, w):
     """:func:`angle_rates` without input checks."""
-    return np.stack(_rate_terms(np.sin(a[..., 1]), np.cos(a[..., 1]), np.sin(a[..., 2]), np.cos(a[..., 2]),
-                                w[..., 0], w[..., 1], w[..., 2]), axis=-1)
-
-
-def _rate_terms(st, ct, ss, cs, w0, w1, w2):
-    """``(phi', theta', psi')`` from theta's and psi's sines and cosines and ``w_np^p``; plain arithmetic."""
-    dphi = (cs * w0 - ss * w1) / ct
-    return dphi, ss * w0 + cs * w1, w2 - st * dphi
+    return np.stack(rate_terms(np.sin(a[..., 1]), np.cos(a[..., 1]), np.sin(a[..., 2]), np.cos(a[..., 2]),
+                               w[..., 0], w[..., 1], w[..., 2]), axis=-1)
 
 
 # --------------------------------------------------------------------------------------------------
-# the error model (plain arithmetic shared with the compiled simulator)
-
-
-def _drift_terms(c, f0, f1, f2):
-    """Gyro drifts (eps_X, eps_Y, eps_Z) from coefficients ``c`` (indexable 0..41) and f^p components.
-
-    Plain arithmetic: ``c[i]`` may be a float (compiled loop) or an array (NumPy, leading axes).
-    """
-    # X gyro (I, O, S) = (x, y, z); Y gyro = (y, z, x); Z gyro = (z, x, y)
-    ex = c[0] + c[3] * f0 + c[4] * f1 + c[5] * f2 + c[12] * f0 * f1 + c[13] * f0 * f2 + c[14] * f1 * f2
-    ey = c[1] + c[6] * f1 + c[7] * f2 + c[8] * f0 + c[15] * f1 * f2 + c[16] * f1 * f0 + c[17] * f2 * f0
-    ez = c[2] + c[9] * f2 + c[10] * f0 + c[11] * f1 + c[18] * f2 * f0 + c[19] * f2 * f1 + c[20] * f0 * f1
-    return ex, ey, ez
-
-
-def _accel_terms(c, f0, f1, f2):
-    """Accelerometer outputs (y_X, y_Y, y_Z) from coefficients ``c`` and f^p components; plain arithmetic."""
-    a0 = f0
-    a1 = c[36] * f0 + f1
-    a2 = c[37] * f0 + c[38] * f1 + f2
-    y0 = c[27] + (1.0 + c[30]) * a0 + c[33] * a0 * a0
-    y1 = c[28] + (1.0 + c[31]) * a1 + c[34] * a1 * a1
-    y2 = c[29] + (1.0 + c[32]) * a2 + c[35] * a2 * a2
-    return y0, y1, y2
+# the error model (element formulas in baselines.rolling.terms)
 
 
 def specific_force_p(C_pn, lat, h=0.0):
@@ -295,7 +260,7 @@ def gyro_drift(coeffs, f_p):
     """
     c = np.moveaxis(_check_coeffs(coeffs), -1, 0)
     f = _check_vec(f_p, "f_p")
-    out = _drift_terms(c, f[..., 0], f[..., 1], f[..., 2])
+    out = drift_terms(c, f[..., 0], f[..., 1], f[..., 2])
     return np.stack(np.broadcast_arrays(*out), axis=-1)
 
 
@@ -367,7 +332,7 @@ def accel_output(coeffs, f_p):
     """
     c = np.moveaxis(_check_coeffs(coeffs), -1, 0)
     f = _check_vec(f_p, "f_p")
-    out = _accel_terms(c, f[..., 0], f[..., 1], f[..., 2])
+    out = accel_terms(c, f[..., 0], f[..., 1], f[..., 2])
     return np.stack(np.broadcast_arrays(*out), axis=-1)
 
 
@@ -395,7 +360,7 @@ def measurement_unchecked(x, g):
     """:func:`measurement` for a checked state and gravity ``g`` (m/s^2): no input checks (inner loops)."""
     f = g * _angles_dcm(x[..., ANGLES])[..., 2, :]
     c = np.moveaxis(x, -1, 0)
-    return np.stack(np.broadcast_arrays(*_accel_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
+    return np.stack(np.broadcast_arrays(*accel_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
 
 
 def state_derivative(state, w_cmd_p, lat, h=0.0):
@@ -432,7 +397,7 @@ def state_derivative_unchecked(x, w, g, w_ie_n):
     C = _angles_dcm(ang)
     f = g * C[..., 2, :]
     c = np.moveaxis(x, -1, 0)
-    eps = np.stack(np.broadcast_arrays(*_drift_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
+    eps = np.stack(np.broadcast_arrays(*drift_terms(c, f[..., 0], f[..., 1], f[..., 2])), axis=-1)
     rhs = (1.0 + x[..., KT]) * w + eps
     G = np.broadcast_to(np.eye(3), x.shape[:-1] + (3, 3)).copy()
     G[..., 0, 1], G[..., 0, 2], G[..., 1, 0] = x[..., 21], x[..., 22], x[..., 23]

@@ -1,9 +1,9 @@
-"""Compiled (numba) model evaluations for the inner loop of :mod:`baselines.rolling_ekf`.
+"""Compiled (numba) model evaluations for the inner loop of :mod:`baselines.rolling.ekf`.
 
 One filter step evaluates the state derivative four times (RK4), the error-state Jacobians, the
 measurement and the error injection on a single 45-vector. In NumPy each of these costs tens of small
 array operations (about 0.9 ms a step in all); compiled, a few microseconds. The equations are those of
-:mod:`baselines.rolling_ekf` (module notes) and :mod:`fusionbench.platform`; the element formulas of the
+:mod:`baselines.rolling.ekf` (module notes) and :mod:`baselines.rolling`; the element formulas of the
 attitude matrix, the angle rates, the drifts and the accelerometer outputs are the platform model's own
 plain-arithmetic functions, compiled here, so there is one copy of each.
 
@@ -16,12 +16,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusionbench.platform.model import _accel_terms, _dcm_terms, _drift_terms, _rate_terms
+from .terms import accel_terms, dcm_terms, drift_terms, rate_terms
 
-_drift = numba.njit(cache=True)(_drift_terms)
-_accel = numba.njit(cache=True)(_accel_terms)
-_dcm_t = numba.njit(cache=True)(_dcm_terms)
-_rates_t = numba.njit(cache=True)(_rate_terms)
+_drift = numba.njit(cache=True)(drift_terms)
+_accel = numba.njit(cache=True)(accel_terms)
+_dcm_t = numba.njit(cache=True)(dcm_terms)
+_rates_t = numba.njit(cache=True)(rate_terms)
 _MOUNT = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))  # (row, column) of G for coefficients 21..26
 
 
@@ -37,7 +37,7 @@ def dcm(a):
 
 @numba.njit(cache=True)
 def angles(C):
-    """Angles ``[phi, theta, psi]`` (rad) of ``C_pn`` (:func:`fusionbench.platform.dcm_to_angles`)."""
+    """Angles ``[phi, theta, psi]`` (rad) of ``C_pn`` (:func:`baselines.rolling.model.dcm_to_angles`)."""
     # M = P_NUE C: rows N, U, E of C
     theta = np.arctan2(C[1, 2], np.hypot(C[1, 0], C[1, 1]))
     psi = np.arctan2(-C[1, 1], C[1, 0])
@@ -62,7 +62,7 @@ def gyro_inverse(c):
 
 @numba.njit(cache=True)
 def drift_jacobian_f(c, f):
-    """``d eps / d f^p`` (3 x 3) of the drift terms (:func:`fusionbench.platform.gyro_drift`)."""
+    """``d eps / d f^p`` (3 x 3) of the drift terms (:func:`baselines.rolling.model.gyro_drift`)."""
     f0, f1, f2 = f[0], f[1], f[2]
     return np.array([
         [c[3] + c[12] * f1 + c[13] * f2, c[4] + c[12] * f0 + c[14] * f2, c[5] + c[13] * f0 + c[14] * f1],

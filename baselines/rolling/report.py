@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import figures as fg
-from . import platform as pf
-from . import units
-from .figures import plt, save_png
-from .imufiles import atomic_open
-from .report import paper_section
-from .runner import write_metrics
+from fusionbench import figures as fg
+from fusionbench import units
+from fusionbench.figures import plt, save_png
+from fusionbench.imufiles import atomic_open
+from fusionbench.report import paper_section
+from fusionbench.runner import write_metrics
+
+from . import model
 
 
 def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y", "K1_Y", "A_YX", "KT_X")):
@@ -27,8 +28,8 @@ def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y"
         if oc["x"] is None:
             continue
         for k, (ax, n) in enumerate(zip(axes.ravel(), names)):
-            i = pf.COEFF_NAMES.index(n)
-            sc, truth = pf.COEFF_SCALE[i], oc["truth"][0, i] / pf.COEFF_SCALE[i]
+            i = model.COEFF_NAMES.index(n)
+            sc, truth = model.COEFF_SCALE[i], oc["truth"][0, i] / model.COEFF_SCALE[i]
             lim = abs(truth) * 3 + 3 * oc["sig_hist"][-1, i] / sc + 1e-12
             if oc.get("x_causal") is not None:
                 est, sig = oc["x_causal"][:, i] / sc, oc["sig_causal"][:, i] / sc
@@ -39,7 +40,7 @@ def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y"
             ax.fill_between(t, est - 3 * sig, est + 3 * sig, color="tab:blue", alpha=0.15, lw=0)
             ax.plot(t, est, color="tab:blue", lw=1.2, label=f"{name}, final estimate, +-3 sigma shaded")
             ax.axhline(truth, color="k", ls="--", lw=1, label="truth")
-            ax.set_ylabel(f"{n} ({pf.COEFF_CUSTOMARY_UNITS[i]})", fontsize=8)
+            ax.set_ylabel(f"{n} ({model.COEFF_CUSTOMARY_UNITS[i]})", fontsize=8)
             ax.grid(alpha=0.3)
             ax.set_ylim(-lim, lim)
             fg.mark_events(ax, c.events, c.scale, numbers=k < 2)

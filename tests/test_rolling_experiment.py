@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from fusionbench import platform as pf
+from baselines.rolling import model
+from baselines.rolling.spec import draw_truth
 from fusionbench import scenarios
-from fusionbench.calibration import draw_truth
 from fusionbench.check import compare
 from fusionbench.experiment import write_scenario_report
 from fusionbench.experiment import run_scenario
@@ -55,9 +55,9 @@ def test_truth_depends_on_seed_and_run_only(tmp_path):
     assert not np.array_equal(c0, draw_truth(spec, 5, 2)[0])
     # drawn from the table: gyro bias around 1 deg/h, accelerometer bias around 100 ug, others zero
     c = np.stack([draw_truth(spec, 0, k)[0] for k in range(400)])
-    assert np.mean(c[:, pf.D0]) / pf.COEFF_SCALE[0] == pytest.approx(1.0, abs=0.05)
-    assert np.std(c[:, pf.K0]) / pf.COEFF_SCALE[27] == pytest.approx(10.0, rel=0.15)
-    assert np.all(c[:, pf.KT] == 0.0)
+    assert np.mean(c[:, model.D0]) / model.COEFF_SCALE[0] == pytest.approx(1.0, abs=0.05)
+    assert np.std(c[:, model.K0]) / model.COEFF_SCALE[27] == pytest.approx(10.0, rel=0.15)
+    assert np.all(c[:, model.KT] == 0.0)
 
 
 def test_run_metrics_follow_the_contract_and_do_not_depend_on_workers(tmp_path):
@@ -69,7 +69,7 @@ def test_run_metrics_follow_the_contract_and_do_not_depend_on_workers(tmp_path):
     r = m["methods"]["rolling-ekf"]
     assert set(m) >= {"scenario", "runs", "seed", "duration_s", "quick", "limits_arcmin", "methods"}
     assert set(r["final_error_arcmin"]["U"]) == {"mean", "std", "rms", "max_abs"} and "wall_s" in r
-    assert set(r["coefficients"]) == set(pf.COEFF_NAMES)
+    assert set(r["coefficients"]) == set(model.COEFF_NAMES)
     assert r["coefficients"]["D0_X"]["unit"] == "deg/h"
     assert 0 < r["information_rank"] <= 45 and m["information_rank"] == r["information_rank"]
     # two passes: the settling time is the causal first pass's; its own end errors are reported beside

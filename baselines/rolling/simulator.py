@@ -1,4 +1,4 @@
-"""The compiled RK4 platform simulator (:mod:`fusionbench.platform`)."""
+"""The compiled RK4 platform simulator (:mod:`baselines.rolling` module notes, "Simulator")."""
 
 from __future__ import annotations
 
@@ -8,18 +8,20 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .. import earth
 from scipy.spatial.transform import Rotation
 
-from .model import (N_COEFFS, PAPER_ACCEL_NOISE, PAPER_GYRO_NOISE, _accel_terms, _check_coeffs, _check_dcm,
-                    _check_site, _drift_terms, dcm_to_angles, gyro_matrix)
+from fusionbench import earth
+
+from .model import (N_COEFFS, PAPER_ACCEL_NOISE, PAPER_GYRO_NOISE, _check_coeffs, _check_dcm, _check_site,
+                    dcm_to_angles, gyro_matrix)
 from .scheme import Scheme, _check_scheme, commands
+from .terms import accel_terms, drift_terms
 
 # --------------------------------------------------------------------------------------------------
 # simulator
 
-_drift_nb = numba.njit(cache=True)(_drift_terms)
-_accel_nb = numba.njit(cache=True)(_accel_terms)
+_drift_nb = numba.njit(cache=True)(drift_terms)
+_accel_nb = numba.njit(cache=True)(accel_terms)
 
 
 @numba.njit(cache=True)

@@ -1,21 +1,21 @@
 """Observability of a rolling torquing scheme: PWCS information matrix, rank, output sensitivity curves.
 
 Seed 002 (continuous rolling self-calibration of a floated inertial platform) argues that its scheme
-(:data:`fusionbench.platform.PAPER_SCHEME`) makes all 45 states of its EKF observable: the information
+(:data:`baselines.rolling.scheme.PAPER_SCHEME`) makes all 45 states of its EKF observable: the information
 matrix of the piecewise-constant system along the scheme has rank 45, and the "output sensitivity
 curves" (its Figs. 4-7) show how strongly each error coefficient drives the accelerometer outputs as
-the platform rolls. This module computes both for any :class:`~fusionbench.platform.Scheme`, so a user
+the platform rolls. This module computes both for any :class:`~baselines.rolling.scheme.Scheme`, so a user
 can check a scheme of their own before running the filter.
 
 Model
 -----
-The filter's linearised error-state model (:func:`baselines.rolling_jacobians.error_jacobians`)::
+The filter's linearised error-state model (:func:`baselines.rolling.jacobians.error_jacobians`)::
 
     e = [c_true - c_est (42, SI), eta (3, rad)],   C_true = (I - [eta x]) C_est   (eta: rotation in ENU)
     de/dt = F_e(x(t), w_cmd(t)) e,   dy = H_e(x(t)) e + v,   v ~ N(0, R),  R = accel_noise^2 I_3
 
 linearised along the *commanded* path: the nominal state ``x(t) = [coeffs, angles(C_path(t))]`` with
-``C_path`` from :func:`fusionbench.platform.commanded_path` (the drift the coefficients would add to the
+``C_path`` from :func:`baselines.rolling.scheme.commanded_path` (the drift the coefficients would add to the
 path is second order in the error and left out).
 
 Piecewise-constant system (PWCS; Goshen-Meskin and Bar-Itzhack, "Observability analysis of
@@ -40,7 +40,7 @@ reports rank 45 for its scheme.
 Scaling. The SI states span 1e-12 rad/s/(m/s^2)^2 (quadratic drift terms) to 0.1 rad (attitude), so
 the SI M has entries from 1e-3 to 1e+30 and its singular values say nothing about rank. In the
 prior-scaled coordinates of the filter, ``e = D z`` with ``D = diag(prior_sigma())``
-(:func:`baselines.rolling_ekf.prior_sigma`: one unit of z is one prior standard deviation)::
+(:func:`baselines.rolling.priors.prior_sigma`: one unit of z is one prior standard deviation)::
 
     M_z = D M D
 
@@ -82,34 +82,36 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from baselines.rolling_ekf import prior_sigma
-from baselines.rolling_jacobians import error_jacobians
 from fusionbench import earth, units
-from fusionbench import platform as pf
+
+from . import model
+from .jacobians import error_jacobians
+from .priors import prior_sigma
+from .scheme import Scheme, commanded_path, commands
 
 #: Default relative tolerance of :func:`information_rank` (on the singular values of the scaled M).
 RTOL = 1e-12
 #: Names of the 45 error states: the coefficients, then the rotation error eta (ENU components).
-ERROR_STATE_NAMES = list(pf.COEFF_NAMES) + ["eta_E", "eta_N", "eta_U"]
+ERROR_STATE_NAMES = list(model.COEFF_NAMES) + ["eta_E", "eta_N", "eta_U"]
 
 
 def _check_inputs(scheme, lat, h, C0, coeffs, step_s):
-    if not isinstance(scheme, pf.Scheme):
-        raise ValueError(f"scheme: expected a fusionbench.platform.Scheme, found {type(scheme).__name__}")
+    if not isinstance(scheme, Scheme):
+        raise ValueError(f"scheme: expected a baselines.rolling.scheme.Scheme, found {type(scheme).__name__}")
     earth.check_latitude(lat, "lat")
     h = float(h)
     if not np.isfinite(h):
         raise ValueError(f"h: expected a finite height in m, found {h}")
     if C0 is None:
-        C0 = pf.angles_to_dcm(np.zeros(3))
+        C0 = model.angles_to_dcm(np.zeros(3))
     C0 = np.asarray(C0, dtype=float)
     if C0.shape != (3, 3):
         raise ValueError(f"C0: expected shape (3, 3), found {C0.shape}")
     if coeffs is None:
-        coeffs = np.zeros(pf.N_COEFFS)
+        coeffs = np.zeros(model.N_COEFFS)
     coeffs = np.asarray(coeffs, dtype=float)
-    if coeffs.shape != (pf.N_COEFFS,) or not np.all(np.isfinite(coeffs)):
-        raise ValueError(f"coeffs: expected {pf.N_COEFFS} finite SI values, found shape {coeffs.shape}")
+    if coeffs.shape != (model.N_COEFFS,) or not np.all(np.isfinite(coeffs)):
+        raise ValueError(f"coeffs: expected {model.N_COEFFS} finite SI values, found shape {coeffs.shape}")
     try:
         step_s = float(step_s)
     except (TypeError, ValueError):
@@ -125,23 +127,23 @@ def _output_sensitivity(scheme, lat, h, C0, coeffs, step_s):
     """Times t_k (k = 1 .. N, s) and ``H_k Phi(t_k, 0)`` (N, 3, 45), SI (unscaled)."""
     n = int(round(scheme.duration / step_s))
     t = np.arange(n + 1) * step_s
-    angles = pf.dcm_to_angles(pf.commanded_path(scheme, C0, t))
-    cmd = pf.commands(scheme, C0, lat)
+    angles = model.dcm_to_angles(commanded_path(scheme, C0, t))
+    cmd = commands(scheme, C0, lat)
     # the command period that holds step k, [t_k, t_k + step_s)
     ci = np.minimum(((t + 0.5 * step_s) // scheme.command_period_s).astype(int), cmd.shape[0] - 1)
-    F = np.empty((n, pf.N_STATES, pf.N_STATES))
-    H = np.empty((n + 1, 3, pf.N_STATES))
+    F = np.empty((n, model.N_STATES, model.N_STATES))
+    H = np.empty((n + 1, 3, model.N_STATES))
     x = np.concatenate([coeffs, np.zeros(3)])
     for k in range(n + 1):
-        x[pf.ANGLES] = angles[k]
+        x[model.ANGLES] = angles[k]
         Fk, H[k] = error_jacobians(x, cmd[ci[k]], lat, h)
         if k < n:
             F[k] = Fk
-    nc = pf.N_COEFFS
+    nc = model.N_COEFFS
     if np.any(F[:, :nc, :] != 0.0):  # not the filter's model (constant coefficients): the plain way
         Phi = expm(F * step_s)
-        out = np.empty((n, 3, pf.N_STATES))
-        P = np.eye(pf.N_STATES)
+        out = np.empty((n, 3, model.N_STATES))
+        P = np.eye(model.N_STATES)
         for k in range(n):
             P = Phi[k] @ P  # Phi(t_{k+1}, 0)
             out[k] = H[k + 1] @ P
@@ -158,8 +160,8 @@ def _output_sensitivity(scheme, lat, h, C0, coeffs, step_s):
     X = expm(uniq.reshape(-1, 6, 6))[inv.ravel()]
     E, GA = X[:, :3, :3], X[:, :3, 3:] @ F[:, nc:, :nc]
     # Q_k = eta rows of Phi(t_k, 0): Q_0 = [0, I], Q_{k+1} = E_k Q_k + [G_k A_k, 0]
-    Q = np.empty((n, 3, pf.N_STATES))
-    q = np.zeros((3, pf.N_STATES))
+    Q = np.empty((n, 3, model.N_STATES))
+    q = np.zeros((3, model.N_STATES))
     q[:, nc:] = np.eye(3)
     for k in range(n):
         q = E[k] @ q
@@ -172,13 +174,13 @@ def _output_sensitivity(scheme, lat, h, C0, coeffs, step_s):
     return t[1:], out
 
 
-def information_matrix(scheme, lat, h=0.0, C0=None, coeffs=None, step_s=1.0, accel_noise=pf.PAPER_ACCEL_NOISE,
+def information_matrix(scheme, lat, h=0.0, C0=None, coeffs=None, step_s=1.0, accel_noise=model.PAPER_ACCEL_NOISE,
                        scaled=True):
     """PWCS information matrix of a torquing scheme (module notes).
 
     Parameters
     ----------
-    scheme : fusionbench.platform.Scheme
+    scheme : baselines.rolling.scheme.Scheme
         Torquing scheme.
     lat : float
         Latitude, rad.
@@ -186,7 +188,7 @@ def information_matrix(scheme, lat, h=0.0, C0=None, coeffs=None, step_s=1.0, acc
         Height, m.
     C0 : array_like, shape (3, 3), optional
         Initial attitude ``C_pn`` (p to ENU); default the zero attitude (platform axes on
-        North-Up-East, ``pf.angles_to_dcm(zeros(3))``).
+        North-Up-East, ``model.angles_to_dcm(zeros(3))``).
     coeffs : array_like, shape (42,), optional
         Nominal error coefficients (SI) to linearise at; default zeros.
     step_s : float, optional
@@ -209,7 +211,7 @@ def information_matrix(scheme, lat, h=0.0, C0=None, coeffs=None, step_s=1.0, acc
     _, S = _output_sensitivity(scheme, lat, h, C0, coeffs, step_s)
     if scaled:
         S = S * prior_sigma()
-    Z = S.reshape(-1, pf.N_STATES) / accel_noise
+    Z = S.reshape(-1, model.N_STATES) / accel_noise
     M = Z.T @ Z
     return 0.5 * (M + M.T)
 
@@ -292,6 +294,15 @@ class Directions:
         return "\n".join(lines)
 
 
+def informed_directions(M, threshold=1.0):
+    """Directions of a prior-scaled information matrix in which the data outweigh the prior: eigenvalues
+    above ``threshold`` (1: the posterior variance ``(I + M)^-1`` is below half the prior's). Unlike the
+    rank (:func:`information_rank`, a structural property) this depends on the noise and the priors: how
+    many directions a run actually calibrates."""
+    ev = np.linalg.eigvalsh(0.5 * (np.asarray(M) + np.asarray(M).T))
+    return int(np.sum(ev > threshold))
+
+
 def unobservable_directions(M, rtol=RTOL, count=None, names=None, min_component=0.05):
     """Combinations of states a scheme cannot separate: the right singular vectors of the smallest
     singular values, named.
@@ -351,7 +362,7 @@ def sensitivity_curves(scheme, lat, h=0.0, C0=None, coeffs=None, step_s=1.0):
     """Output sensitivity curves of a scheme (seed 002's Figs. 4-7).
 
     ``S(t_k) = H_k Phi(t_k, 0) D``: the change of the three accelerometer outputs at ``t_k`` caused by
-    an initial error of one prior standard deviation (:func:`baselines.rolling_ekf.prior_sigma`) in each
+    an initial error of one prior standard deviation (:func:`baselines.rolling.priors.prior_sigma`) in each
     of the 45 error states (module notes).
 
     Parameters
@@ -400,7 +411,7 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
     groups : sequence of (title, list of names), optional
         Panels; default :data:`FIGURE_GROUPS`.
     events : sequence of fusionbench.figures.Event, optional
-        Marked on the time axis (e.g. :func:`fusionbench.figures.scheme_events`, the roll phases).
+        Marked on the time axis (e.g. :func:`baselines.rolling.scheme.scheme_events`, the roll phases).
 
     Returns
     -------

@@ -1,16 +1,39 @@
-"""Floated (ball) inertial platform: error model, rolling torquing schemes and a fast simulator.
+"""Seed 002's family: continuous rolling self-calibration and self-alignment of a floated (ball) inertial platform.
 
 Seed 002 (Ding, Cai, Yang, Lian: continuous rolling self-calibration and self-alignment of a floated
 inertial platform). The inner sphere (platform frame p) carries three gyros and three accelerometers;
 its stabilisation loops make it turn at the torquer-commanded rates plus the gyro drifts. While the
 sphere rolls in the gravity field, a 45-state EKF estimates 42 error coefficients and 3 attitude angles
-from the accelerometer outputs. This module is the model that both the truth generation
-(:func:`simulate`) and that filter (:func:`state_derivative`, :func:`measurement`) use.
+from the accelerometer outputs. This package holds all of it: the platform model that both the truth
+generation (:func:`simulator.simulate`) and that filter (:func:`model.state_derivative`,
+:func:`model.measurement`) use, the experiment that runs it (a scenario's ``experiment = "platform-rolling"``),
+its method and its report. The core (:mod:`fusionbench`) knows none of it: it finds the experiment and the
+method by name through their entry points (pyproject.toml, groups ``fusionbench.experiments`` and
+``fusionbench.calibrators``). These notes are the model's equations; each module documents its own part.
+
+Modules (each imports only modules above it in this list, and :mod:`fusionbench`)
+----------------------------------------------------------------------------------
+terms : the element formulas (attitude matrix, angle rates, drifts, outputs) in plain arithmetic, one copy
+    for NumPy and numba.
+model : coefficients, their names and units, attitude angles, the error model, the filter's f(x) and h(x).
+scheme : rolling schemes as data, the commanded path, the torque commands, the roll phases as figure events.
+simulator : the compiled RK4 simulator of the platform (the truth).
+protocol : what a calibration method is (:class:`protocol.Calibrator`), what it returns
+    (:class:`protocol.CalibrationResult`), and how one is found by name.
+priors : the prior standard deviations of the 45 states (shared by the filter and the observability analysis).
+kernels : compiled model evaluations of the filter's inner loop.
+jacobians : analytic Jacobians of f and h, in angle and in error-state form.
+observability : information matrix, rank, weakest directions and output sensitivity of a scheme.
+ekf : the method ``rolling-ekf``, seed 002's 45-state EKF (and the linearised passes after it).
+spec : the scenario file's ``[platform]`` table and the per-run draw of the truth.
+montecarlo : the Monte Carlo of a platform-rolling scenario and its metrics.json figures.
+report : report.md and the figures of a run.
+experiment : the ``platform-rolling`` experiment (:class:`fusionbench.experiment.Experiment`).
 
 Frames
 ------
 n : navigation frame, East-North-Up (ENU). NUE is the same frame with its axes listed North-Up-East:
-    ``v_NUE = P v_ENU`` with ``P = [[0, 1, 0], [0, 0, 1], [1, 0, 0]]`` (:data:`P_NUE`).
+    ``v_NUE = P v_ENU`` with ``P = [[0, 1, 0], [0, 0, 1], [1, 0, 0]]`` (:data:`model.P_NUE`).
 p : platform frame. ``x_p`` along the X accelerometer's sensitive axis; ``y_p`` in the plane of the
     X and Y accelerometer axes, perpendicular to ``x_p``; ``z_p = x_p x y_p``.
 
@@ -39,7 +62,7 @@ ends. So from the nominal start (platform axes on North-Up-East, all angles zero
 off by small angles: far from its singularity at +-90 deg. The *intrinsic* reading
 ``P @ C_pn = Rz(psi) Ry(theta) Rx(phi)`` (scipy ``"ZYX"``) does not have this property: after the
 first 90-deg east turn, a turn about south becomes a turn about the intermediate y axis, and
-``theta`` runs through 90 deg (gimbal lock) in the third segment (tests/test_platform.py measures
+``theta`` runs through 90 deg (gimbal lock) in the third segment (tests/test_rolling_platform.py measures
 both).
 
 Euler-angle rates. With ``w = w_np^p`` (rate of p relative to n, in p), from ``C_pn^T dC_pn/dt = [w x]``::
@@ -50,7 +73,7 @@ Euler-angle rates. With ``w = w_np^p`` (rate of p relative to n, in p), from ``C
     theta' =  sin psi w_x + cos psi w_y
     psi'   =  w_z - sin theta phi'
 
-Error coefficients (42, order of :data:`COEFF_NAMES`)
+Error coefficients (42, order of :data:`model.COEFF_NAMES`)
 ------------------------------------------------------
 Gyro axes (input I, output O, spin S), nominal and cyclic: X gyro (x_p, y_p, z_p), Y gyro
 (y_p, z_p, x_p), Z gyro (z_p, x_p, y_p).
@@ -112,12 +135,12 @@ Accelerometer outputs (m/s^2), sensitive-axis matrix A (the X axis defines p)::
 
 The EKF's model (45-vector ``x = [42 coefficients, phi, theta, psi]``)::
 
-    h(x) = y(coeffs, C_pn(angles)^T f^n)                                  (:func:`measurement`)
-    f(x) = [0 (42), Euler rates of w_np^p (exact platform rate)]        (:func:`state_derivative`)
+    h(x) = y(coeffs, C_pn(angles)^T f^n)                                  (:func:`model.measurement`)
+    f(x) = [0 (42), Euler rates of w_np^p (exact platform rate)]        (:func:`model.state_derivative`)
 
 Torquing scheme and commands
 ----------------------------
-A :class:`Scheme` is a sequence of segments, each a rotation of the platform *relative to n* about a
+A :class:`scheme.Scheme` is a sequence of segments, each a rotation of the platform *relative to n* about a
 fixed ENU unit axis ``u`` at rate ``r`` (rad/s) for a duration (s, a whole number of command
 periods); rate 0 holds the platform still relative to n (the command is then the earth rate alone).
 The commanded path from the initial attitude ``C0``::
@@ -126,7 +149,7 @@ The commanded path from the initial attitude ``C0``::
 
 The torque command is held over each command period k (1 s) and computed from the path at the
 period's middle: ``w_cmd^p = C_path(t_mid)^T (w_ie^n + r u)``, the absolute rate the platform needs
-to follow the path. :data:`PAPER_SCHEME`: 0.1 deg/s about geographic south for 1800 s, about east
+to follow the path. :data:`scheme.PAPER_SCHEME`: 0.1 deg/s about geographic south for 1800 s, about east
 900 s, south 1800 s, east 900 s (5400 s; every rotation axis horizontal, so gravity sweeps through
 the platform, and each platform axis turns through about 180 deg).
 
@@ -137,7 +160,7 @@ end); it scales with T^2 (6e-7 arcsec with 10-ms commands).
 
 Simulator
 ---------
-:func:`simulate` integrates the unit quaternion ``q`` of ``C_pn`` (Hamilton, scalar first,
+:func:`simulator.simulate` integrates the unit quaternion ``q`` of ``C_pn`` (Hamilton, scalar first,
 ``v_n = q v_p q*``) with the classical 4th-order Runge-Kutta method at ``sample_s`` (2 ms)::
 
     dq/dt = 1/2 q (x) [0, w_ip^p] - 1/2 [0, w_ie^n] (x) q
@@ -148,9 +171,9 @@ the current attitude at every Runge-Kutta stage (exact ``G^-1``). Noise:
 * gyro: white drift, an independent normal value of standard deviation ``gyro_noise`` (rad/s) per
   sample, held over that sample (equivalent angle random walk ``gyro_noise * sqrt(sample_s)``,
   rad/sqrt(s)); the paper's "0.05 deg/h white" is read as that sigma per 2-ms sample
-  (:data:`PAPER_GYRO_NOISE`);
+  (:data:`model.PAPER_GYRO_NOISE`);
 * accelerometer: an independent normal value of standard deviation ``accel_noise`` (m/s^2) added to
-  each filter output (the paper's 1 ug, :data:`PAPER_ACCEL_NOISE`).
+  each filter output (the paper's 1 ug, :data:`model.PAPER_ACCEL_NOISE`).
 
 Outputs come every ``filter_s`` (0.2 s) at ``t_k = k filter_s``, k = 1, 2, ...: the accelerometer
 outputs *sampled at t_k* (instantaneous, so ``y_k = h(x(t_k)) + v_k`` holds exactly; an average over
@@ -162,22 +185,3 @@ chunks of about 50,000 samples, so run r's numbers do not depend on the batch si
 
 Every function validates its input and raises one ``ValueError`` line naming the field.
 """
-
-from __future__ import annotations
-
-from .model import (ACCEL_MOUNT, ANGLES, COEFF_CUSTOMARY_UNITS, COEFF_NAMES, COEFF_SCALE, COEFF_UNITS, D0, D1, D2,
-                    GYRO_MOUNT, K0, K1, K2, KT, N_COEFFS, N_STATES, P_NUE, PAPER_ACCEL_NOISE, PAPER_GYRO_NOISE,
-                    STATE_NAMES, accel_matrix, accel_output, angle_rates, angles_to_dcm, attitude_rate, coeff_vector,
-                    dcm_to_angles, euler_rate_matrix, from_customary, gyro_drift, gyro_matrix, measurement,
-                    measurement_unchecked, platform_rate, specific_force_p, state_derivative,
-                    state_derivative_unchecked, to_customary)
-from .scheme import PAPER_SCHEME, Scheme, Segment, commanded_path, commands
-from .simulator import PlatformRun, simulate
-
-__all__ = ["ACCEL_MOUNT", "ANGLES", "COEFF_CUSTOMARY_UNITS", "COEFF_NAMES", "COEFF_SCALE", "COEFF_UNITS", "D0", "D1",
-           "D2", "GYRO_MOUNT", "K0", "K1", "K2", "KT", "N_COEFFS", "N_STATES", "P_NUE", "PAPER_ACCEL_NOISE",
-           "PAPER_GYRO_NOISE", "PAPER_SCHEME", "PlatformRun", "STATE_NAMES", "Scheme", "Segment", "accel_matrix",
-           "accel_output", "angle_rates", "angles_to_dcm", "attitude_rate", "coeff_vector", "commanded_path",
-           "commands", "dcm_to_angles", "euler_rate_matrix", "from_customary", "gyro_drift", "gyro_matrix",
-           "measurement", "measurement_unchecked", "platform_rate", "simulate", "specific_force_p",
-           "state_derivative", "state_derivative_unchecked", "to_customary"]

@@ -1,11 +1,11 @@
 """Seed 002's 45-state EKF for continuous rolling self-calibration and self-alignment (method ``rolling-ekf``).
 
-State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]`` of :mod:`fusionbench.platform`: the
+State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]`` of :mod:`baselines.rolling`: the
 attitude enters as the platform's Euler angles from North-Up-East, not as small misalignment angles,
 so initial attitude errors of several degrees are allowed. Measurements: the three accelerometer
 outputs (m/s^2) every ``filter_s`` (0.2 s). The filter knows its torque commands.
 
-Model (``fusionbench.platform`` module notes)::
+Model (``baselines.rolling`` module notes)::
 
     x' = f(x, w_cmd) = [0 (42);  E(angles) w_np^p]
     w_np^p = G^-1 ((I + diag KT) w_cmd + eps(c, f^p)) - C_pn^T w_ie^n   (exact; not the paper's eq. 19)
@@ -18,7 +18,7 @@ with E the inverse of the Euler-rate matrix B (``w = B [phi', theta', psi']``)::
     theta' = sin psi w_x + cos psi w_y
     psi' = w_z - sin theta phi'
 
-Jacobians: analytic, in :mod:`baselines.rolling_jacobians` (tests compare them with central finite
+Jacobians: analytic, in :mod:`baselines.rolling.jacobians` (tests compare them with central finite
 differences).
 
 Filter (filterpy :class:`~filterpy.kalman.ExtendedKalmanFilter`, Joseph-form update) on the states
@@ -29,14 +29,14 @@ propagated over each filter step with 4th-order Runge-Kutta of ``f`` (command he
 with U three rows too, and ``Phi P Phi^T = P + U P + P U^T + U P U^T`` takes two 3 x 45 x 45 products.
 Process noise only on the attitude, from the gyros' white drift (``q T I``, q the rate noise density,
 rad^2/s); measurement noise the accelerometers' white noise. The model evaluations of the inner loop
-(RK4, F_e, H_e, h, the error injection) are compiled (:mod:`baselines.rolling_kernels`); the update is
+(RK4, F_e, H_e, h, the error injection) are compiled (:mod:`baselines.rolling.kernels`); the update is
 filterpy's. One step takes about 0.2 ms, one pass over the paper's 27 000 outputs about 5 s.
 
 Error-state covariance. The estimate keeps the Euler angles, but the covariance is that of the error
 ``e = [c_true - c_est (42), eta (3)]`` with ``C_true = (I - [eta x]) C_est`` (eta a small rotation in n)::
 
-    eta' = -C dw/dc dc + C dw/df C^T [f^n x] eta - [w_ie^n x] eta            (F_e, :func:`error_F`)
-    y - h(x_est) = H_e e,  H_e = [dh/dc,  -diag(s) A C^T [f^n x]]             (:func:`error_H`)
+    eta' = -C dw/dc dc + C dw/df C^T [f^n x] eta - [w_ie^n x] eta            (F_e: jacobians.error_F)
+    y - h(x_est) = H_e e,  H_e = [dh/dc,  -diag(s) A C^T [f^n x]]             (jacobians.error_H)
 
 after each update the estimated error is folded into the estimate (coefficients added, attitude turned by
 ``C <- R(-eta) C``) and reset to zero. Why: with the angles' own covariance, the filter linearised the
@@ -65,37 +65,26 @@ The prior is then centred on the first pass's estimate rather than on zero; the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from threadpoolctl import threadpool_limits
 
-from pathlib import Path
-
 from fusionbench import earth
-from fusionbench import platform as pf
 
-from . import rolling_kernels as K
-from .rolling_jacobians import (_rate_inverse, error_F, error_H, error_jacobians, jacobian_f,  # noqa: F401
-                                jacobian_h)
+from . import kernels as K
+from . import model
+from .jacobians import rate_inverse
+from .observability import information_rank, informed_directions, sensitivity_curves, sensitivity_figure
+from .priors import ANGLE_SIGMA_DEG, prior_sigma
+from .protocol import CalibrationResult
+from .scheme import scheme_events
 
-#: Prior standard deviation of each coefficient group in its customary unit (filter starts at zero),
-#: and of the attitude angles (deg): wide enough for seed 002's Table 1 spreads and a coarse start.
-PRIOR_SIGMA = {"D0": 2.0, "D1": 2.0, "D2": 0.5, "GYRO_MOUNT": 300.0, "K0": 1000.0, "K1": 1000.0, "K2": 50.0,
-               "ACCEL_MOUNT": 300.0, "KT": 1000.0}
-ANGLE_SIGMA_DEG = 5.0
 #: ``passes="auto"``: stop when a linearised pass moved every coefficient by less than this many of its
 #: sigmas from the pass before; never more than this many passes in all.
 AUTO_TOLERANCE = 0.5
 AUTO_MAX_PASSES = 5
-def informed_directions(M, threshold=1.0):
-    """Directions of a prior-scaled information matrix in which the data outweigh the prior: eigenvalues
-    above ``threshold`` (1: the posterior variance ``(I + M)^-1`` is below half the prior's). Unlike the
-    rank (:func:`baselines.rolling_observability.information_rank`, a structural property) this depends
-    on the noise and the priors: how many directions a run actually calibrates."""
-    ev = np.linalg.eigvalsh(0.5 * (np.asarray(M) + np.asarray(M).T))
-    return int(np.sum(ev > threshold))
 
 
 def level(y_mean):
@@ -113,70 +102,6 @@ def level(y_mean):
     return np.array([-np.arcsin(np.clip(u[2], -1, 1)), 0.0, np.arctan2(u[0], u[1])])
 
 
-def prior_sigma(angle_sigma_deg=ANGLE_SIGMA_DEG, groups=None):
-    """Prior standard deviations of the 45 states, SI (from :data:`PRIOR_SIGMA` in customary units)."""
-    groups = {**PRIOR_SIGMA, **(groups or {})}
-    sig = np.empty(pf.N_STATES)
-    for name, val in groups.items():
-        sl = getattr(pf, name)
-        sig[sl] = val * pf.COEFF_SCALE[sl]
-    sig[pf.ANGLES] = np.radians(angle_sigma_deg)
-    return sig
-
-
-@dataclass
-class CalibrationResult:
-    """What :meth:`RollingEKF.calibrate` returns.
-
-    Attributes
-    ----------
-    t : ndarray, shape (M,)
-        Filter times, s.
-    x : ndarray, shape (M, 45)
-        State estimate after each update: 42 coefficients (SI) and the angles (rad).
-    sigma : ndarray, shape (M, 45)
-        Its standard deviations (square roots of the diagonal of P).
-    figures : dict
-        ``information_rank``: rank of the information matrix the run gathered (below; SVD, relative
-        tolerance :data:`baselines.rolling_observability.RTOL`), ``informed_directions``
-        (:func:`informed_directions`).
-    information : ndarray, shape (45, 45)
-        Information matrix of the run in prior-scaled error coordinates (e = D z):
-        ``sum_k Phi(t_k, 0)^T H_k^T R^-1 H_k Phi(t_k, 0)`` with the filter's own F and H along its
-        estimate and R the accelerometer noise (the piecewise-constant-system information matrix).
-    first_pass : CalibrationResult or None
-        With more than one pass, the first (causal, real-time) EKF pass; its attitude history is the one
-        whose settling time means something (later passes start from an estimate that used all the data).
-    scale : ndarray, shape (45,)
-        The prior standard deviations D that scale ``information`` (SI).
-    """
-
-    t: np.ndarray
-    x: np.ndarray
-    sigma: np.ndarray
-    figures: dict = None
-    information: np.ndarray = None
-    first_pass: "CalibrationResult" = None
-    scale: np.ndarray = None
-
-    def bound(self):
-        """Information bound of the coefficients and angles (45,), SI: ``D sqrt(diag((I + information)^-1))``,
-        the standard deviations an efficient estimator reaches with this run's prior and outputs (the
-        Cramer-Rao bound of the linearised model, the gyros' white drift left out). None without
-        ``information``."""
-        if self.information is None:
-            return None
-        return self.scale * np.sqrt(np.diag(np.linalg.inv(np.eye(len(self.scale)) + self.information)))
-
-    def final(self, last_s=100.0):
-        """The paper's readout, (45,): coefficients averaged over the last ``last_s`` seconds; the angles
-        at the last filter time (they move with the platform, an average would mix attitudes)."""
-        sel = self.t >= self.t[-1] - last_s
-        out = self.x[sel].mean(axis=0)
-        out[pf.ANGLES] = self.x[-1, pf.ANGLES]
-        return out
-
-
 class RollingEKF:
     """Seed 002's rolling self-calibration and self-alignment EKF (method ``rolling-ekf``).
 
@@ -184,7 +109,7 @@ class RollingEKF:
     ----------
     gyro_noise : float
         Gyro white drift, standard deviation per simulator sample (rad/s), as in
-        :func:`fusionbench.platform.simulate`.
+        :func:`baselines.rolling.simulator.simulate`.
     sample_s : float
         The sample time that ``gyro_noise`` refers to, s (rate noise density ``gyro_noise^2 sample_s``).
     accel_noise : float
@@ -192,7 +117,7 @@ class RollingEKF:
     angle_sigma_deg : float
         Prior standard deviation of the attitude angles, deg.
     prior : dict, optional
-        Overrides of :data:`PRIOR_SIGMA` (customary units).
+        Overrides of :data:`baselines.rolling.priors.PRIOR_SIGMA` (customary units).
     level_s : float
         Seconds of outputs averaged for the initial levelling when no ``x0`` is given.
     second_order : float
@@ -218,7 +143,7 @@ class RollingEKF:
     name = "rolling-ekf"
     description = "seed 002's 45-state EKF: 42 platform error coefficients and the attitude angles from rolling"
 
-    def __init__(self, gyro_noise=pf.PAPER_GYRO_NOISE, sample_s=0.002, accel_noise=pf.PAPER_ACCEL_NOISE,
+    def __init__(self, gyro_noise=model.PAPER_GYRO_NOISE, sample_s=0.002, accel_noise=model.PAPER_ACCEL_NOISE,
                  angle_sigma_deg=ANGLE_SIGMA_DEG, prior=None, level_s=1.0, second_order=3.0, passes=2):
         if passes != "auto" and not (isinstance(passes, (int, np.integer)) and passes >= 1):
             raise ValueError(f"passes: expected a whole number >= 1 or 'auto', found {passes!r}")
@@ -265,8 +190,8 @@ class RollingEKF:
     def _run(self, t, y, w_cmd, lat, h, x0):
         dt = float(t[1] - t[0])
         if x0 is None:
-            x0 = np.zeros(pf.N_STATES)
-            x0[pf.ANGLES] = level(y[t - t[0] < self.level_s].mean(axis=0))
+            x0 = np.zeros(model.N_STATES)
+            x0[model.ANGLES] = level(y[t - t[0] < self.level_s].mean(axis=0))
         first = res = self._pass(t, y, w_cmd, lat, h, np.array(x0, dtype=float), self.second_order)
         auto = self.passes == "auto"
         done = 1
@@ -275,7 +200,8 @@ class RollingEKF:
             last = res
             res = self._pass(t, y, w_cmd, lat, h, backward(res.x[-1], w_cmd, dt, lat, h), 0.0, nominal=True)
             done += 1
-            moved = np.max(np.abs(res.x[-1, :pf.N_COEFFS] - last.x[-1, :pf.N_COEFFS]) / res.sigma[-1, :pf.N_COEFFS])
+            nc = model.N_COEFFS
+            moved = np.max(np.abs(res.x[-1, :nc] - last.x[-1, :nc]) / res.sigma[-1, :nc])
             if auto and done >= 3 and moved < AUTO_TOLERANCE:
                 break
         res.first_pass = first if done > 1 else None
@@ -289,19 +215,19 @@ class RollingEKF:
         # covariance of the error state, scaled by the prior sigmas (e = D z): the raw errors span 1e-12
         # rad/s to 0.1 rad, too wide for a positive-definite covariance in float64
         D = self.sigma0
-        kf = ExtendedKalmanFilter(dim_x=pf.N_STATES, dim_z=3)
-        kf.P = np.eye(pf.N_STATES)
+        kf = ExtendedKalmanFilter(dim_x=model.N_STATES, dim_z=3)
+        kf.P = np.eye(model.N_STATES)
         kf.R = self.r * np.eye(3)
-        q_eta = self.q_rate * dt / D[pf.ANGLES] ** 2  # gyro white drift as rotation noise in n
+        q_eta = self.q_rate * dt / D[model.ANGLES] ** 2  # gyro white drift as rotation noise in n
         g = float(earth.gravity(lat, h))
         wie = earth.earth_rate_n(lat)
-        A = pf.ANGLES
-        xs = np.empty((t.size, pf.N_STATES))
-        sig = np.empty((t.size, pf.N_STATES))
-        info = np.zeros((pf.N_STATES, pf.N_STATES))
-        Phi_0 = np.eye(pf.N_STATES)
+        A = model.ANGLES
+        xs = np.empty((t.size, model.N_STATES))
+        sig = np.empty((t.size, model.N_STATES))
+        info = np.zeros((model.N_STATES, model.N_STATES))
+        Phi_0 = np.eye(model.N_STATES)
         scale = dt * D[None, :] / D[A, None]
-        e = np.zeros((pf.N_STATES, 1))
+        e = np.zeros((model.N_STATES, 1))
         for k in range(t.size):
             # Phi = I + F T + (F T)^2 / 2 = I + U: F_e has only the three attitude rows, so U does too and
             # Phi P Phi^T = P + U P + P U^T + U P U^T costs two 3 x 45 x 45 products instead of 45^3 ones
@@ -322,7 +248,7 @@ class RollingEKF:
                 e[A] += U @ e
                 kf.x = e
             else:
-                kf.x = np.zeros((pf.N_STATES, 1))
+                kf.x = np.zeros((model.N_STATES, 1))
             # second-order term of h in the attitude error eta (the second-order EKF's added variance):
             # f^p changes by C^T (eta x (eta x f^n)) / 2 = g C^T (eta_h eta_U - |eta_h|^2 e_U) / 2 (eta_h the
             # tilt, eta_U the azimuth part); while the attitude is degrees off this is tens of ug, and
@@ -337,17 +263,11 @@ class RollingEKF:
             if not nominal:
                 x = xs[k]
             sig[k] = _sigmas(xs[k], kf.P, D)
-        from .rolling_observability import information_rank  # it builds on this module's Jacobians
-
         figures = {"information_rank": information_rank(info), "informed_directions": informed_directions(info)}
         return CalibrationResult(t, xs, sig, figures, info, scale=D)
 
     def report_figures(self, folder, scheme, lat, h=0.0):
         """The output-sensitivity curves of ``scheme`` (seed 002 Figs. 4-7) into ``folder``; [(file, caption)]."""
-        from .rolling_observability import sensitivity_curves, sensitivity_figure
-
-        from fusionbench.calibration import scheme_events
-
         times, S = sensitivity_curves(scheme, lat, h)
         sensitivity_figure(times, S, path=Path(folder) / "sensitivity.png", events=scheme_events(scheme))
         return [("sensitivity.png", "output sensitivity of the coefficients along the scheme (seed 002 Figs. 4-7)")]
@@ -357,8 +277,8 @@ def _sigmas(x, P, D):
     """Standard deviations of the 45 states from the scaled error covariance; the angles' through
     ``d angles = -E C^T eta`` (a rotation eta in n seen by the Euler angles)."""
     sig = np.sqrt(np.diag(P)) * D
-    J = -_rate_inverse(x[pf.ANGLES]) @ K.dcm(x[pf.ANGLES]).T * D[None, pf.ANGLES]
-    sig[pf.ANGLES] = np.sqrt(np.diag(J @ P[pf.ANGLES, pf.ANGLES] @ J.T))
+    J = -rate_inverse(x[model.ANGLES]) @ K.dcm(x[model.ANGLES]).T * D[None, model.ANGLES]
+    sig[model.ANGLES] = np.sqrt(np.diag(J @ P[model.ANGLES, model.ANGLES] @ J.T))
     return sig
 
 

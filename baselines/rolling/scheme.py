@@ -1,4 +1,5 @@
-"""Rolling torquing schemes as data, the commanded path and the torque commands (:mod:`fusionbench.platform`)."""
+"""Rolling torquing schemes as data, the commanded path, the torque commands and the roll phases as figure events
+(:mod:`baselines.rolling` module notes)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .. import earth, units
+from fusionbench import earth, units
+
 from .model import _check_dcm
 
 # --------------------------------------------------------------------------------------------------
@@ -129,8 +131,11 @@ class Scheme:
         return np.clip(np.searchsorted(self._starts, t, side="right") - 1, 0, len(self.segments) - 1)
 
 
-_SOUTH = (0.0, -1.0, 0.0)
-_EAST = (1.0, 0.0, 0.0)
+#: Named ENU unit axes, as a scenario's scheme segment may give them (``axis = "south"``).
+AXES = {"east": (1.0, 0.0, 0.0), "west": (-1.0, 0.0, 0.0), "north": (0.0, 1.0, 0.0), "south": (0.0, -1.0, 0.0),
+        "up": (0.0, 0.0, 1.0), "down": (0.0, 0.0, -1.0)}
+_SOUTH = AXES["south"]
+_EAST = AXES["east"]
 _R = 0.1 * units.DEG
 #: Seed 002's scheme: 0.1 deg/s about south 1800 s, east 900 s, south 1800 s, east 900 s.
 PAPER_SCHEME = Scheme(((_SOUTH, _R, 1800.0), (_EAST, _R, 900.0), (_SOUTH, _R, 1800.0), (_EAST, _R, 900.0)))
@@ -209,3 +214,14 @@ def commands(scheme, C0, lat):
     return np.einsum("...kji,kj->...ki", C, w_n)
 
 
+def scheme_events(scheme):
+    """The roll phases of a scheme as unshaded spans (:class:`fusionbench.figures.Event`), named by their axis."""
+    from fusionbench.figures import Event  # matplotlib only when a figure is drawn
+
+    names = {v: k for k, v in AXES.items()}
+    ev, t = [], 0.0
+    for seg in scheme.segments:
+        ev.append(Event(t, t + seg.duration, f"roll about {names.get(tuple(seg.axis), str(tuple(seg.axis)))}",
+                        shade=False))
+        t += seg.duration
+    return ev

@@ -1,12 +1,12 @@
-"""Analytic Jacobians of seed 002's rolling-EKF model (:mod:`baselines.rolling_ekf`), in two forms.
+"""Analytic Jacobians of seed 002's rolling-EKF model (:mod:`baselines.rolling.ekf`), in two forms.
 
-State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]``; model in the :mod:`baselines.rolling_ekf`
-and :mod:`fusionbench.platform` module notes (``f^p = g M^T e_U``, ``M = P C_pn = Rx(phi) Ry(theta)
+State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]``; model in the :mod:`baselines.rolling.ekf`
+and :mod:`baselines.rolling` module notes (``f^p = g M^T e_U``, ``M = P C_pn = Rx(phi) Ry(theta)
 Rz(psi)``, exact platform rate ``w_ip = G^-1 ((I + diag KT) w_cmd + eps)``, E the inverse Euler-rate matrix).
 
 Angle space (:func:`jacobian_h`, :func:`jacobian_f`: the derivatives of ``h(x)`` and ``f(x)`` themselves)
 and error state (:func:`error_H`, :func:`error_F`: the covariance's model, ``e = [c_true - c_est, eta]``
-with ``C_true = (I - [eta x]) C_est``; the filter uses these, compiled in :mod:`baselines.rolling_kernels`).
+with ``C_true = (I - [eta x]) C_est``; the filter uses these, compiled in :mod:`baselines.rolling.kernels`).
 
 Jacobians (analytic; tests compare them with central finite differences):
 
@@ -27,9 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench import platform as pf
 
-from . import rolling_kernels as K
+from . import kernels as K
+from . import model
 
 _E1, _E2, _E3 = np.eye(3)
 
@@ -50,8 +50,9 @@ def _dM(angles):
     return M, (K.skew(_E1) @ M, Rx @ K.skew(_E2) @ Ry @ Rz, M @ K.skew(_E3))
 
 
-def _rate_inverse(angles):
-    """E with [phi', theta', psi'] = E w."""
+def rate_inverse(angles):
+    """E (3 x 3) with ``[phi', theta', psi'] = E w``: the inverse of the Euler-rate matrix B of the
+    :mod:`baselines.rolling` module notes, for the angles ``[phi, theta, psi]`` (rad); w = ``w_np^p`` (rad/s, p)."""
     st, ct = np.sin(angles[1]), np.cos(angles[1])
     ss, cs = np.sin(angles[2]), np.cos(angles[2])
     return np.array([[cs / ct, -ss / ct, 0.0], [ss, cs, 0.0], [-st * cs / ct, st * ss / ct, 1.0]])
@@ -59,27 +60,27 @@ def _rate_inverse(angles):
 
 def jacobian_h(x, lat, h=0.0):
     """dh/dx (3 x 45) at the 45-vector ``x`` (module notes)."""
-    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    c, ang = x[:model.N_COEFFS], x[model.ANGLES]
     g = float(earth.gravity(lat, h))
     M, dM = _dM(ang)
     H = K.error_H(np.asarray(x, dtype=float), g)  # the coefficient columns are the error state's
-    A = pf.accel_matrix(c)
-    s = 1.0 + c[pf.K1] + 2.0 * c[pf.K2] * (A @ (g * M[1]))  # dy/da; f^p = g M^T e_U (e_U = NUE y)
+    A = model.accel_matrix(c)
+    s = 1.0 + c[model.K1] + 2.0 * c[model.K2] * (A @ (g * M[1]))  # dy/da; f^p = g M^T e_U (e_U = NUE y)
     df = np.stack([g * d[1] for d in dM], axis=1)  # columns d f^p / d alpha
-    H[:, pf.ANGLES] = (s[:, None] * A) @ df
+    H[:, model.ANGLES] = (s[:, None] * A) @ df
     return H
 
 
 def jacobian_f(x, w_cmd, lat, h=0.0):
     """df/dx (45 x 45) at ``x`` under the command ``w_cmd`` (rad/s, p frame); rows of the coefficients are zero."""
-    c, ang = x[:pf.N_COEFFS], x[pf.ANGLES]
+    c, ang = x[:model.N_COEFFS], x[model.ANGLES]
     g = float(earth.gravity(lat, h))
-    w_ie_nue = pf.P_NUE @ earth.earth_rate_n(lat)
+    w_ie_nue = model.P_NUE @ earth.earth_rate_n(lat)
     M, dM = _dM(ang)
     f = g * M[1]
     w_ip, dw_dc, dw_df = K.rate_partials(np.asarray(c, dtype=float), f, np.asarray(w_cmd, dtype=float))
     w = w_ip - M.T @ w_ie_nue
-    E = _rate_inverse(ang)
+    E = rate_inverse(ang)
     rates = E @ w
     dw_da = np.stack([dw_df @ (g * d[1]) - d.T @ w_ie_nue for d in dM], axis=1)
     st, ct = np.sin(ang[1]), np.cos(ang[1])
@@ -87,9 +88,9 @@ def jacobian_f(x, w_cmd, lat, h=0.0):
     explicit[0, 1], explicit[0, 2] = rates[0] * st / ct, -rates[1] / ct
     explicit[1, 2] = rates[0] * ct
     explicit[2, 1], explicit[2, 2] = -rates[0] / ct, rates[1] * st / ct
-    F = np.zeros((pf.N_STATES, pf.N_STATES))
-    F[pf.ANGLES, :pf.N_COEFFS] = E @ dw_dc
-    F[pf.ANGLES, pf.ANGLES] = E @ dw_da + explicit
+    F = np.zeros((model.N_STATES, model.N_STATES))
+    F[model.ANGLES, :model.N_COEFFS] = E @ dw_dc
+    F[model.ANGLES, model.ANGLES] = E @ dw_da + explicit
     return F
 
 
@@ -103,9 +104,9 @@ def error_jacobians(x, w_cmd, lat, h=0.0):
 
 def error_F(x, w_cmd, lat, h=0.0):
     """d e / dt = F_e e (45 x 45): ``eta' = -C dw/dc dc + C dw/df C^T [f^n x] eta - [w_ie^n x] eta``
-    (``dw/dc``, ``dw/df``: partials of the exact platform rate, :func:`baselines.rolling_kernels.rate_partials`)."""
-    F = np.zeros((pf.N_STATES, pf.N_STATES))
-    F[pf.ANGLES] = K.error_F_rows(np.asarray(x, dtype=float), np.asarray(w_cmd, dtype=float),
+    (``dw/dc``, ``dw/df``: partials of the exact platform rate, :func:`baselines.rolling.kernels.rate_partials`)."""
+    F = np.zeros((model.N_STATES, model.N_STATES))
+    F[model.ANGLES] = K.error_F_rows(np.asarray(x, dtype=float), np.asarray(w_cmd, dtype=float),
                                   float(earth.gravity(lat, h)), earth.earth_rate_n(lat))
     return F
 
