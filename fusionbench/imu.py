@@ -31,7 +31,7 @@ from scipy.signal import lfilter
 from . import fields, units
 from .imudata import IMUData
 
-__all__ = ["SensorErrors", "IMUSpec", "NoiseSchedule", "VelocityReferenceSpec", "IMUData",
+__all__ = ["SensorErrors", "IMUSpec", "NoiseSchedule", "VelocityReferenceSpec",
            "PRESETS", "simulate", "simulate_chunks", "simulate_vref", "run_seed_sequence",
            "spec_from_table", "schedules_from_list", "load_spec"]
 

@@ -1,4 +1,4 @@
-"""IMUData: the container every aligner takes (re-exported by :mod:`fusionbench.imu`).
+"""IMUData: the container every aligner takes (the simulator of :mod:`fusionbench.imu` makes it).
 
 Samples come in one of two kinds:
 

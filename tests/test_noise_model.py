@@ -11,7 +11,8 @@ from baselines.kalman import KalmanAligner
 from fusionbench import fields, units
 from fusionbench.aligner import load_method, uses_noise_model, variant
 from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, IMUData, load_spec
+from fusionbench.imu import PRESETS, load_spec
+from fusionbench.imudata import IMUData
 
 SPEC_TOML = """
 [imu]

@@ -249,7 +249,8 @@ def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(t
     # once. Measured on prefixes every 25 s, its settling is the causal method's settling read at those times.
     from fusionbench.coarse import CoarseAligner
     from fusionbench import metrics, units
-    from fusionbench.imu import IMUData, simulate
+    from fusionbench.imu import simulate
+    from fusionbench.imudata import IMUData
 
     p = tmp_path / "settle.toml"
     p.write_text('name = "settle"\nduration_s = 200.0\nrate_hz = 20.0\nruns = 4\nmethods = ["coarse"]\n'
