@@ -5,7 +5,7 @@ quoted in customary units; multiply by a constant here to get SI, divide to get 
 
 >>> 0.01 * DEG_PER_H          # gyro bias 0.01 deg/h in rad/s
 4.84813681109536e-08
->>> to_unit(4.84813681109536e-08, "deg/h")
+>>> 4.84813681109536e-08 / DEG_PER_H
 0.01
 
 ``G0`` (standard gravity, 9.80665 m/s^2) defines the unit "g" and so "ug"; it is a unit, not
@@ -15,8 +15,6 @@ the local gravity (see :func:`fusionbench.earth.gravity` for that).
 from __future__ import annotations
 
 import math
-
-import numpy as np
 
 #: Standard gravity, m/s^2: the definition of the unit g.
 G0 = 9.80665
@@ -46,49 +44,3 @@ UG_PER_SQRT_HZ = UG
 PPM = 1e-6
 #: Velocity random walk 1 m/s/sqrt(h) in m/s/sqrt(s).
 M_PER_S_SQRT_H = 1.0 / math.sqrt(HOUR)
-
-#: Unit names accepted in scenario files and :func:`to_si` / :func:`to_unit`.
-UNITS = {
-    "rad": 1.0,
-    "deg": DEG,
-    "arcmin": ARCMIN,
-    "arcsec": ARCSEC,
-    "rad/s": 1.0,
-    "deg/s": DEG,
-    "deg/h": DEG_PER_H,
-    "rad/sqrt(s)": 1.0,
-    "deg/sqrt(h)": DEG_PER_SQRT_H,
-    "deg/h/sqrt(h)": DEG_PER_H_SQRT_H,
-    "m/s^2": 1.0,
-    "g": G0,
-    "mg": MG,
-    "ug": UG,
-    "ug/sqrt(Hz)": UG_PER_SQRT_HZ,
-    "m/s/sqrt(h)": M_PER_S_SQRT_H,
-    "m/s/sqrt(s)": 1.0,
-    "m/s": 1.0,
-    "m": 1.0,
-    "s": 1.0,
-    "h": HOUR,
-    "min": 60.0,
-    "Hz": 1.0,
-    "ppm": PPM,
-    "1": 1.0,
-}
-
-
-def _factor(unit: str) -> float:
-    try:
-        return UNITS[unit]
-    except KeyError:
-        raise ValueError(f"unit: expected one of {sorted(UNITS)}, found {unit!r}") from None
-
-
-def to_si(value, unit: str):
-    """Convert ``value`` given in ``unit`` (a key of :data:`UNITS`) to SI."""
-    return np.asarray(value, dtype=float) * _factor(unit) if np.ndim(value) else float(value) * _factor(unit)
-
-
-def to_unit(value, unit: str):
-    """Convert ``value`` in SI to ``unit`` (a key of :data:`UNITS`)."""
-    return np.asarray(value, dtype=float) / _factor(unit) if np.ndim(value) else float(value) / _factor(unit)
