@@ -220,6 +220,9 @@ def schedules_from_list(items, src, key):
             raise fields.FieldError(f"{fields.where(src, label)}: expected start_s, end_s, factor [, sensors], found {it!r}")
         start = fields.number(it, "start_s", src, lo=0, label=f"{label}.start_s")
         end = fields.number(it, "end_s", src, lo=start, label=f"{label}.end_s")
+        if end <= start:
+            raise fields.FieldError(f"{fields.where(src, label + '.end_s')}: expected an end after start_s = {start:g} s, "
+                                    f"found {end:g}")
         factor = fields.number(it, "factor", src, lo=0, hi=1e8, label=f"{label}.factor")
         sensors = it.get("sensors", list(_SENSORS))
         if not isinstance(sensors, list) or not sensors or not all(x in _SENSORS for x in sensors):

@@ -32,6 +32,8 @@ class PaperClaims(FeatureBase):
         if not isinstance(claims, dict):
             raise fields.FieldError(f"{fields.where(src, 'paper.settling_time_s')}: expected a table of method = "
                                     f"seconds, found {claims!r}")
+        for method in claims:
+            fields.number(claims, method, src, lo=0.0, label=f"paper.settling_time_s.{method}")
         return cls(table.get("reference", "source paper"), table.get("note", ""), dict(claims))
 
     def markdown(self, out):

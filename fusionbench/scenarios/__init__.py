@@ -21,6 +21,7 @@ s, sensor figures in the datasheet units named in the key (``gyro_bias_dph``, ``
 
 from __future__ import annotations
 
+import inspect
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import attitude, features, fields, imu, trajectory
-from ..aligner import Site
+from ..aligner import Site, entry_class
 from ..experiment import load_experiment
 
 _TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
@@ -141,6 +142,12 @@ class Scenario:
 
 
 _where, _num, _vec = fields.where, fields.number, fields.vector
+#: Largest sway amplitude, deg: a ship rolls by tens of degrees at most.
+MAX_SWAY_DEG = 45.0
+#: Largest acceleration of a motion segment per ENU axis, m/s^2 (10 g: beyond any vehicle an alignment runs on).
+MAX_ACCEL_MPS2 = 100.0
+#: Largest velocity-noise figure (reference noise, disturbance RMS), m/s.
+MAX_SPEED_MPS = 100.0
 
 
 def _schedules(items, src, key):
@@ -174,8 +181,8 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     rate = _num(data, "rate_hz", src, lo=1.0, hi=10000.0)
     runs = int(_num(data, "runs", src, default=10, lo=1, hi=100000))
     methods = data.get("methods", ["coarse"])
-    if not isinstance(methods, list) or not all(isinstance(m, str) for m in methods):
-        raise ScenarioError(f"{_where(src, 'methods')}: expected a list of method names, found {methods!r}")
+    if not isinstance(methods, list) or not methods or not all(isinstance(m, str) and m for m in methods):
+        raise ScenarioError(f"{_where(src, 'methods')}: expected a non-empty list of method names, found {methods!r}")
     quick = data.get("quick", {})
     q_dur = _num(quick, "duration_s", f"{src} [quick]", default=min(duration, 120.0), lo=1.0, hi=duration)
     q_runs = int(_num(quick, "runs", f"{src} [quick]", default=min(runs, 3), lo=1, hi=runs))
@@ -187,32 +194,42 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     s = f"{src} [attitude]"
     mean = (np.radians(_num(at, "pitch_deg", s, 0.0, -90, 90)), np.radians(_num(at, "roll_deg", s, 0.0, -180, 180)),
             -np.radians(_num(at, "heading_deg", s, 0.0, -360, 360)))
-    amp = tuple(np.radians(_vec(at, "sway_amplitude_deg", s)))
+    amp = tuple(np.radians(_vec(at, "sway_amplitude_deg", s, lo=0.0, hi=MAX_SWAY_DEG)))
     freq = _vec(at, "sway_frequency_hz", s)
     if min(freq) < 0 or max(freq) > rate / 4:
         raise ScenarioError(f"{_where(src, 'attitude.sway_frequency_hz')}: expected values in [0, rate_hz/4], found {freq}")
-    phase = tuple(np.radians(_vec(at, "sway_phase_deg", s)))
+    phase = tuple(np.radians(_vec(at, "sway_phase_deg", s, lo=-360.0, hi=360.0)))
     mo = data.get("motion", {})
     s = f"{src} [motion]"
     segs = []
     for i, it in enumerate(mo.get("segments", [])):
         if not isinstance(it, dict) or set(it) != {"accel_mps2", "duration_s"}:
             raise ScenarioError(f"{_where(src, f'motion.segments[{i}]')}: expected accel_mps2 and duration_s, found {it!r}")
-        segs.append(trajectory.Segment(_vec(it, "accel_mps2", s), _num(it, "duration_s", s, lo=0.0)))
+        segs.append(trajectory.Segment(_vec(it, "accel_mps2", s, lo=-MAX_ACCEL_MPS2, hi=MAX_ACCEL_MPS2),
+                                       _num(it, "duration_s", s, lo=0.0)))
     dist = None
     if "disturbance_rms_mps" in mo:
         band = _vec(mo, "disturbance_band_hz", s, (0.1, 2.0), n=2)
         if not 0 < band[0] < band[1] <= rate / 4:
             raise ScenarioError(f"{_where(src, 'motion.disturbance_band_hz')}: expected 0 < low < high <= rate_hz/4, found {band}")
-        dist = trajectory.VelocityDisturbance(_vec(mo, "disturbance_rms_mps", s), band,
+        dist = trajectory.VelocityDisturbance(_vec(mo, "disturbance_rms_mps", s, lo=0.0, hi=MAX_SPEED_MPS), band,
                                               seed=int(_num(mo, "disturbance_seed", s, 0.0, 0, 2**31)))
-    translation = trajectory.Translation(segments=tuple(segs), start=_num(mo, "start_s", s, 0.0, 0.0), disturbance=dist)
+    start = _num(mo, "start_s", s, 0.0, 0.0)
+    if start >= duration and segs:
+        raise ScenarioError(f"{_where(src, 'motion.start_s')}: expected a start inside the record (< duration_s = "
+                            f"{duration:g} s), found {start:g}")
+    translation = trajectory.Translation(segments=tuple(segs), start=start, disturbance=dist)
     spec = _imu_spec(data.get("imu", {}), src)
     vr = data.get("vref", {})
-    vspec = imu.VelocityReferenceSpec(_vec(vr, "sigma_mps", f"{src} [vref]"),
+    vspec = imu.VelocityReferenceSpec(_vec(vr, "sigma_mps", f"{src} [vref]", lo=0.0, hi=MAX_SPEED_MPS),
                                       _schedules(vr.get("schedule", []), src, "vref.schedule"))
+    for key, scheds in (("imu.schedule", spec.schedules), ("vref.schedule", vspec.schedules)):
+        for i, sc in enumerate(scheds):
+            if sc.start >= duration:
+                raise ScenarioError(f"{_where(src, f'{key}[{i}].start_s')}: expected a window that starts inside the "
+                                    f"record (< duration_s = {duration:g} s), found {sc.start:g}")
     init = data.get("init", {})
-    mis = _vec(init, "misalignment_deg", f"{src} [init]") if "misalignment_deg" in init else None
+    mis = _vec(init, "misalignment_deg", f"{src} [init]", lo=-180.0, hi=180.0) if "misalignment_deg" in init else None
     band = _num(data.get("metrics", {}), "settling_band_arcmin", f"{src} [metrics]", 1.0, 1e-6, 1e4)
     zoom = _num(data.get("metrics", {}), "zoom_from_s", f"{src} [metrics]", 100.0, 0.0, duration)
     try:
@@ -220,11 +237,12 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     except ValueError as exc:  # a feature's own message, as every scenario error: one line
         raise ScenarioError(str(exc).splitlines()[0]) from None
     variants = data.get("variants", {})
+    experiment = data.get("experiment", "alignment")
+    exp = _experiment(experiment, src)
     for vname, opts in variants.items():
         if not isinstance(opts, dict) or not isinstance(opts.get("method"), str):
             raise ScenarioError(f"{_where(src, 'variants.' + vname)}: expected a table with a 'method' name and its options")
-    experiment = data.get("experiment", "alignment")
-    exp = _experiment(experiment, src)
+        _check_variant_options(exp, vname, opts, src)
     setup = {}
     for key, parser in tables.items():
         if not isinstance(data.get(key), dict):
@@ -238,6 +256,23 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
                     site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, zoom, feats,
                     experiment, setup, src, kind, data)
+
+
+def _check_variant_options(exp, vname, opts, src):
+    """A variant's options must be options of its method's constructor (checked when the file is read, not when the
+    variant first runs); their values are the method's to check when it is built."""
+    try:
+        cls = entry_class(exp.method_group, opts["method"], "method")
+    except ValueError as exc:
+        raise ScenarioError(f"{_where(src, 'variants.' + vname + '.method')}: {str(exc).splitlines()[0]}") from None
+    params = inspect.signature(cls).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    for key in opts:
+        if key != "method" and key not in params:
+            allowed = sorted(k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_POSITIONAL)
+            raise ScenarioError(f"{_where(src, f'variants.{vname}.{key}')}: unknown option of method "
+                                f"{opts['method']!r} (expected one of {allowed})")
 
 
 def _experiment(name, src):
@@ -270,6 +305,11 @@ def load(path) -> Scenario:
         raise ScenarioError(f"{path}: no such scenario file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{path}: expected a UTF-8 TOML text file, found bytes that are not text ({exc.reason} "
+                            f"at byte {exc.start})") from None
+    except IsADirectoryError:
+        raise ScenarioError(f"{path}: expected a scenario file, found a folder") from None
     return _parse_any(data, str(path))
 
 
