@@ -398,9 +398,17 @@ def simulate_chunks(trajectory, spec: IMUSpec, dt, runs=1, seed=0, first_run=0, 
         Length, s (default: the trajectory's).
     """
     duration = trajectory.duration if duration is None else duration
+    if not (isinstance(dt, (int, float, np.floating)) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"simulate dt: expected a positive sample interval in s, found {dt!r}")
+    if not (isinstance(runs, (int, np.integer)) and runs >= 1):
+        raise ValueError(f"simulate runs: expected a positive whole number of runs, found {runs!r}")
+    if not (isinstance(first_run, (int, np.integer)) and first_run >= 0):
+        raise ValueError(f"simulate first_run: expected a non-negative whole number, found {first_run!r}")
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"simulate duration: expected a positive length in s, found {duration!r}")
     n_total = int(round(duration / dt))
     if n_total < 1:
-        raise ValueError(f"duration: expected at least one sample of {dt} s, found {duration} s")
+        raise ValueError(f"simulate duration: expected at least one sample of {dt} s, found {duration} s")
     states = [_RunState(spec, seed, first_run + r) for r in range(runs)]
     per_chunk = max(1, int(round(chunk_s / dt)))
     for k0 in range(0, n_total, per_chunk):

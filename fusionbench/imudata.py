@@ -22,6 +22,48 @@ from dataclasses import dataclass
 import numpy as np
 
 KINDS = ("increment", "rate")
+#: Largest angular rate any IMU measures, rad/s (about 5700 deg/s; MEMS gyros reach 2000-4000 deg/s): a sample
+#: beyond it is a unit or scaling error (deg/s read as rad/s, raw counts), not motion.
+MAX_RATE_RADPS = 100.0
+#: Largest specific force a navigation IMU measures, m/s^2 (50 g).
+MAX_SPECIFIC_FORCE_MPS2 = 50 * 9.80665
+#: Relative tolerance on the uniformity of the time step.
+STEP_TOLERANCE = 1e-3
+
+
+def time_defect(t):
+    """The first defect of a time column ``t`` (N,) s: ``(k, what, detail)`` for sample k, or None when the times
+    are finite, strictly increasing and uniform (to :data:`STEP_TOLERANCE`)."""
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        return int(bad[0]), f"non-finite value {t[bad[0]]}", ""
+    step = np.diff(t)
+    bad = np.flatnonzero(step <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        return k, "time not strictly increasing", f"t={t[k]:.10g} after {t[k - 1]:.10g}"
+    med = float(np.median(step)) if step.size else 0.0
+    bad = np.flatnonzero(np.abs(step - med) > STEP_TOLERANCE * med)
+    if bad.size:
+        k = int(bad[0]) + 1
+        return k, "non-uniform time step", (f"step {step[k - 1]:.10g} s, median step {med:.10g} s (relative "
+                                            f"tolerance {STEP_TOLERANCE:g})")
+    return None
+
+
+def sample_defect(values, limit, unit):
+    """The first defect of samples ``values`` (R, N, 3): ``((r, k, axis), text)`` for a non-finite value or one
+    beyond ``limit`` (in ``unit``), or None."""
+    finite = np.isfinite(values)
+    if not finite.all():
+        r, k, j = np.argwhere(~finite)[0]
+        return (int(r), int(k), "xyz"[j]), f"non-finite value {values[r, k, j]}"
+    big = np.abs(values) > limit
+    if big.any():
+        r, k, j = np.argwhere(big)[0]
+        return (int(r), int(k), "xyz"[j]), (f"{values[r, k, j]:.6g} {unit}, beyond the {limit:g} {unit} any IMU of its "
+                                            f"kind measures (a unit or scaling error?)")
+    return None
 
 
 @dataclass
@@ -45,9 +87,11 @@ class IMUData:
     kind: str = "increment"
 
     def __post_init__(self):
-        self.t = np.asarray(self.t, dtype=float)
-        self.gyro = np.asarray(self.gyro, dtype=float)
-        self.accel = np.asarray(self.accel, dtype=float)
+        for name in ("t", "gyro", "accel"):
+            raw = np.asarray(getattr(self, name))
+            if raw.dtype.kind not in "iuf":
+                raise ValueError(f"IMUData {name}: expected real numbers, found {raw.dtype} values")
+            setattr(self, name, raw.astype(float, copy=False))
         if self.gyro.ndim == 2:
             self.gyro = self.gyro[None]
         if self.accel.ndim == 2:
@@ -62,6 +106,17 @@ class IMUData:
                 raise ValueError(f"IMUData {name}: expected shape (runs, {n}, 3), found {a.shape}")
         if self.gyro.shape != self.accel.shape:
             raise ValueError(f"IMUData accel: expected shape {self.gyro.shape}, found {self.accel.shape}")
+        bad = time_defect(self.t)
+        if bad:
+            k, what, detail = bad
+            raise ValueError(f"IMUData t: {what} at sample {k}" + (f": {detail}" if detail else ""))
+        scale = 1.0 if self.kind == "rate" else self.dt  # an increment's limit is the rate's over one interval
+        for name, limit, unit in (("gyro", MAX_RATE_RADPS, "rad/s"), ("accel", MAX_SPECIFIC_FORCE_MPS2, "m/s^2")):
+            bad = sample_defect(getattr(self, name) / scale, limit, unit)
+            if bad:
+                (r, k, axis), text = bad
+                raise ValueError(f"IMUData {name}: {text} at run {r}, sample {k}, axis {axis}"
+                                 + (" (increment over dt, as a rate)" if self.kind == "increment" else ""))
 
     @property
     def dt(self) -> float:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .imudata import IMUData
+from .imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, IMUData, sample_defect, time_defect
 from .units import ARCSEC, DEG
 
 __all__ = ["IMUFileError", "read_imu", "read_csv", "read_npz", "read_psins",
@@ -96,27 +96,22 @@ def _too_short(path, n, min_samples):
         raise IMUFileError(path, f"too short: {n} samples, the method needs at least {need}")
 
 
-def _check_samples(path, t, gyro, accel, min_samples, where):
-    """Finite values, enough samples, strictly increasing and uniform time; ``where(k)`` names row k."""
-    for key, arr in (("t", t[:, None]), ("g", gyro), ("a", accel)):
-        bad = np.argwhere(~np.isfinite(arr))
-        if bad.size:
-            k, j = bad[0]
-            name = "t" if key == "t" else key + "xyz"[j]
-            raise IMUFileError(path, f"non-finite value {arr[k, j]} at {where(k)}, column '{name}'")
+def _check_samples(path, t, gyro, accel, min_samples, where, scale=1.0):
+    """Finite values within an IMU's range, enough samples, strictly increasing and uniform time; ``where(k)``
+    names row k; ``scale`` turns a sample into a rate (the interval of an increment, 1 for rates)."""
+    bad = time_defect(t)
+    if bad and not np.isfinite(t[bad[0]]):  # a non-finite time first, like a non-finite sample
+        raise IMUFileError(path, f"{bad[1]} at {where(bad[0])}, column 't'")
+    for key, arr, limit, unit in (("g", gyro, MAX_RATE_RADPS, "rad/s"), ("a", accel, MAX_SPECIFIC_FORCE_MPS2, "m/s^2")):
+        found = sample_defect(arr[None] / scale, limit, unit)
+        if found:
+            (_, k, axis), text = found
+            raise IMUFileError(path, f"{text} at {where(k)}, column '{key}{axis}'"
+                                     + (" (an increment over its interval, as a rate)" if scale != 1.0 else ""))
     _too_short(path, t.size, min_samples)
-    step = np.diff(t)
-    bad = np.flatnonzero(step <= 0)
-    if bad.size:
-        k = bad[0] + 1
-        raise IMUFileError(path, f"time not strictly increasing at {where(k)}: "
-                                 f"t={t[k]:.10g} after {t[k - 1]:.10g}")
-    med = float(np.median(step))
-    bad = np.flatnonzero(np.abs(step - med) > 1e-3 * med)
-    if bad.size:
-        k = bad[0] + 1
-        raise IMUFileError(path, f"non-uniform time step at {where(k)}: step {step[k - 1]:.10g} s, "
-                                 f"median step {med:.10g} s (relative tolerance 1e-3)")
+    if bad:
+        k, what, detail = bad
+        raise IMUFileError(path, f"{what} at {where(k)}: {detail}")
 
 
 def _rate_result(path, fmt, t, gyro, accel):
@@ -204,11 +199,16 @@ def read_npz(path, min_samples=2):
         raise
     except OSError as e:
         raise _open_error(path, e) from None
-    except Exception as e:  # zipfile.BadZipFile, pickled or object arrays, corrupt headers
+    except ValueError as e:
+        if "allow_pickle" in str(e):  # numpy refuses object arrays without unpickling them; so do we, always
+            raise IMUFileError(path, "holds object (pickled) arrays, expected numeric arrays t, gyro and accel "
+                                     "(fusionbench never unpickles a file)") from None
+        raise IMUFileError(path, f"not a valid NPZ archive ({type(e).__name__}: {e})") from None
+    except Exception as e:  # zipfile.BadZipFile, corrupt headers
         raise IMUFileError(path, f"not a valid NPZ archive ({type(e).__name__}: {e})") from None
     for name, a in arrays.items():
-        if not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
-            raise IMUFileError(path, f"array '{name}' has dtype {a.dtype}, expected numbers")
+        if a.dtype.kind not in "iuf":
+            raise IMUFileError(path, f"array '{name}' has dtype {a.dtype}, expected real numbers")
     n = arrays["t"].size
     if arrays["t"].ndim != 1:
         raise IMUFileError(path, f"array 't' has shape {arrays['t'].shape}, expected (N,)")
@@ -266,15 +266,17 @@ def read_psins(path, min_samples=2):
     try:
         counts = np.array(fields, dtype=np.int64).reshape(-1, 6)
     except (ValueError, OverflowError):
-        k, x = next((k, x) for k, f in enumerate(fields) for x in f if not _is_number(x, int))
+        k, x = next((k, x) for k, f in enumerate(fields) for x in f
+                    if not _is_number(x, int) or not -2**63 <= int(x) < 2**63)
         raise IMUFileError(path, f"sample row {k} (line {rows[k][0]}): {_cell(x)} is not an "
-                                 f"integer count") from None
+                                 f"integer count (64-bit)") from None
     _too_short(path, counts.shape[0], min_samples)
     h = np.array(head)
     dt, g = float(h[10]) * 1e-3, float(h[11])
     t = h[9] + dt * np.arange(1, counts.shape[0] + 1)
     gyro = counts[:, :3] * (h[12:15] * ARCSEC)
     accel = counts[:, 3:] * (h[15:18] * 1e-6 * g)
+    _check_samples(path, t, gyro, accel, min_samples, lambda k: f"sample row {k} (line {rows[k][0]})", scale=dt)
     h = h.tolist()
     meta = {"path": os.fspath(path), "format": "psins", "attitude0": [a * DEG for a in h[0:3]],
             "v0": h[3:6], "lat": h[6] * DEG, "lon": h[7] * DEG, "h": h[8], "t0": h[9], "dt": dt,
@@ -321,6 +323,8 @@ def read_imu(path, min_samples=2):
 def atomic_open(path, binary=False):
     """Yield a temporary file next to ``path``; on success ``os.replace`` it onto ``path``."""
     path = Path(path)
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"{path}: cannot write it: its folder {path.parent} does not exist")
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # mode honours the umask
     try:
@@ -412,19 +416,33 @@ def write_psins(path, imu, attitude0, v0=(0.0, 0.0, 0.0), *, lat, lon=0.0, h=0.0
     Quantisation carries each sample's fractional remainder into the next, so every cumulative
     sum of the counts stays within half a count of the exact one.
     """
+    def vec3(name, v):  # what read_psins will ask of the header, asked before anything is written
+        a = np.asarray(v, dtype=float)
+        if a.shape != (3,) or not np.isfinite(a).all():
+            raise ValueError(f"write_psins {name}: expected 3 finite numbers, found {v!r}")
+        return a
+
+    attitude0, v0 = vec3("attitude0", attitude0), vec3("v0", v0)
+    for name, value, lo, hi in (("lat", lat, -np.pi / 2, np.pi / 2), ("lon", lon, -2 * np.pi, 2 * np.pi),
+                                ("h", h, -1e4, 1e5), ("g", g, 1.0, 20.0)):
+        if not (np.isfinite(value) and lo <= value <= hi):
+            raise ValueError(f"write_psins {name}: expected a finite number in [{lo:g}, {hi:g}], found {value!r}")
+    if not (isinstance(run, (int, np.integer)) and 0 <= run < imu.runs):
+        raise ValueError(f"write_psins run: expected a recording index in [0, {imu.runs - 1}], found {run!r}")
     t_end, dth, dv = imu.increments()
     dt = float((t_end[-1] - t_end[0]) / (t_end.size - 1)) if t_end.size > 1 else imu.dt
     gs = np.broadcast_to(np.asarray(gyro_scale_arcsec, dtype=float), (3,))
     acs = np.broadcast_to(np.asarray(accel_scale_ugs, dtype=float), (3,))
-    if not (np.all(gs > 0) and np.all(acs > 0) and g > 0):
-        raise ValueError("count scales and g must be positive")
+    if not (np.all(gs > 0) and np.all(acs > 0)):
+        raise ValueError(f"write_psins gyro_scale_arcsec, accel_scale_ugs: expected positive count sizes, found "
+                         f"{gyro_scale_arcsec!r}, {accel_scale_ugs!r}")
     x = np.column_stack([dth[run] / (gs * ARCSEC), dv[run] / (acs * 1e-6 * g)])
     if not np.isfinite(x).all() or np.abs(x).sum(axis=0).max() > 2.0 ** 62:
         raise ValueError(f"run {run} holds non-finite or out-of-range values; nothing written")
     # Residual carry (counts[k] = round(x[k] + remainder[k-1])) = differences of rounded cumsums.
     cum = np.rint(np.cumsum(x, axis=0)).astype(np.int64)
     counts = np.diff(cum, axis=0, prepend=np.zeros((1, 6), dtype=np.int64))
-    rows = [[*(np.asarray(attitude0, dtype=float) / DEG), *np.asarray(v0, dtype=float)],
+    rows = [[*(attitude0 / DEG), *v0],
             [lat / DEG, lon / DEG, h, t_end[0] - dt, dt * 1e3, g], [*gs, *acs]]
     with atomic_open(path) as f:
         f.write("% PSINS-format SIMU log file written by fusionbench.\n"

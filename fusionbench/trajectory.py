@@ -280,6 +280,11 @@ class Trajectory:
 
     def __post_init__(self):
         earth.check_latitude(self.lat, "trajectory latitude")
+        for name, value, lo, hi in (("lon", self.lon, -4 * np.pi, 4 * np.pi), ("h", self.h, -1e4, 1e5)):
+            if not (np.isfinite(value) and lo <= value <= hi):
+                raise ValueError(f"Trajectory {name}: expected a finite number in [{lo:g}, {hi:g}], found {value!r}")
+        if not (np.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"Trajectory duration: expected a positive length in s, found {self.duration!r}")
         self._pos = None
 
     # position: lat' = vN / (RM + h), lon' = vE / ((RN + h) cos lat), h' = vU, for the mean motion;

@@ -1,0 +1,112 @@
+"""Bad IMU data at the boundary (issue 14): the container, the readers and writers, the simulator's arguments.
+Each defect is one ValueError line naming the field or file, what was expected and what was found."""
+
+import numpy as np
+import pytest
+
+from fusionbench import imu
+from fusionbench import trajectory as tj
+from fusionbench.imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, IMUData
+from fusionbench.imufiles import IMUFileError, read_imu, write_npz, write_psins
+
+N = 200
+T = np.arange(1, N + 1) * 0.01
+GYRO = np.tile([1e-5, 2e-5, 3e-5], (N, 1))
+ACCEL = np.tile([0.0, 0.0, 9.8], (N, 1))
+
+
+def _one_line(exc, *words):
+    msg = str(exc.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+@pytest.mark.parametrize("field, t, gyro, accel, words", [
+    ("t", T[::-1], GYRO, ACCEL, ["IMUData t", "not strictly increasing", "sample 1"]),
+    ("t", np.r_[np.nan, T[1:]], GYRO, ACCEL, ["IMUData t", "non-finite", "sample 0"]),
+    ("t", np.r_[T[:100], T[100:] + 0.005], GYRO, ACCEL, ["IMUData t", "non-uniform time step", "sample 100"]),
+    ("gyro", T, GYRO + 1j, ACCEL, ["IMUData gyro", "expected real numbers", "complex"]),
+    ("gyro", T, np.where(np.arange(N)[:, None] == 7, np.nan, GYRO), ACCEL, ["IMUData gyro", "non-finite", "sample 7"]),
+    ("gyro", T, GYRO + 1e6, ACCEL, ["IMUData gyro", f"beyond the {MAX_RATE_RADPS:g} rad/s", "sample 0, axis x"]),
+    ("accel", T, GYRO, ACCEL * 1e300, ["IMUData accel", f"beyond the {MAX_SPECIFIC_FORCE_MPS2:g} m/s^2", "axis z"]),
+    ("accel", T, GYRO, ACCEL.astype(str), ["IMUData accel", "expected real numbers"]),
+])
+def test_the_container_refuses_what_no_imu_records(field, t, gyro, accel, words):
+    with pytest.raises(ValueError) as exc:
+        IMUData(t, gyro, accel, "rate")
+    _one_line(exc, *words)
+
+
+def test_an_increments_range_is_its_rate_over_one_interval():
+    ok = IMUData(T, GYRO * 0.01, ACCEL * 0.01, "increment")  # 9.8 m/s^2 over 10 ms
+    assert ok.rates()[1][0, 0, 2] == pytest.approx(9.8)
+    with pytest.raises(ValueError) as exc:  # 0.5 rad in 10 ms: 50 rad/s... is fine; 2 rad in 10 ms is not
+        IMUData(T, np.full((N, 3), 2.0), ACCEL * 0.01, "increment")
+    _one_line(exc, "IMUData gyro", "200 rad/s", "as a rate")
+    IMUData(T, np.full((N, 3), 0.5), ACCEL * 0.01, "increment")
+
+
+def test_files_with_values_beyond_an_imus_range_are_refused_with_their_row(tmp_path):
+    p = tmp_path / "big.csv"  # degrees per second read as rad/s would be 57 times too big; 1e6 is counts
+    rows = [f"{t:.2f},{1e6 if k == 4 else 1e-5},0,0,0,0,9.8" for k, t in enumerate(T)]
+    p.write_text("t,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n")
+    with pytest.raises(IMUFileError) as exc:
+        read_imu(p)
+    _one_line(exc, str(p), "row 4", "column 'gx'", "rad/s")
+    np.savez(tmp_path / "c.npz", t=T, gyro=GYRO + 1j, accel=ACCEL)
+    with pytest.raises(IMUFileError) as exc:
+        read_imu(tmp_path / "c.npz")
+    _one_line(exc, "c.npz", "array 'gyro'", "complex", "expected real numbers")
+    np.savez(tmp_path / "o.npz", t=np.array([object()], dtype=object), gyro=GYRO, accel=ACCEL)
+    with pytest.raises(IMUFileError) as exc:
+        read_imu(tmp_path / "o.npz")
+    _one_line(exc, "o.npz", "object (pickled) arrays", "never unpickles")
+
+
+def test_a_psins_file_with_absurd_counts_is_refused_not_aligned(tmp_path):
+    p = tmp_path / "x.imu"
+    write_psins(p, IMUData(T, GYRO, ACCEL, "rate"), [0.0, 0.0, 0.0], lat=0.6)
+    lines = p.read_text().splitlines()
+    k = next(i for i, s in enumerate(lines) if s and not s.startswith("%")) + 3  # the first sample row
+    for count, words in (("9000000000000000000", ["sample row 0", "rad/s", "as a rate"]),
+                         ("99999999999999999999", ["sample row 0", "not an integer count (64-bit)"])):
+        lines2 = list(lines)
+        lines2[k] = " ".join([count] + lines[k].split()[1:])
+        p.write_text("\n".join(lines2) + "\n")
+        with pytest.raises(IMUFileError) as exc:
+            read_imu(p)
+        _one_line(exc, str(p), *words)
+
+
+def test_writers_refuse_what_their_reader_would_refuse(tmp_path):
+    data = IMUData(T, GYRO, ACCEL, "rate")
+    with pytest.raises(ValueError) as exc:
+        write_psins(tmp_path / "x.imu", data, [0.0, 0.0, 0.0], lat=float("nan"))
+    _one_line(exc, "write_psins lat", "nan")
+    with pytest.raises(ValueError) as exc:
+        write_psins(tmp_path / "x.imu", data, [0.0, 0.0], lat=0.6)
+    _one_line(exc, "write_psins attitude0", "3 finite numbers")
+    assert not list(tmp_path.iterdir())  # nothing written
+    with pytest.raises(FileNotFoundError) as exc:
+        write_npz(tmp_path / "no" / "x.npz", data)
+    _one_line(exc, str(tmp_path / "no" / "x.npz"), "folder", "does not exist")
+    assert ".tmp" not in str(exc.value)
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    ({"dt": 0.0}, ["simulate dt", "positive"]), ({"dt": -0.01}, ["simulate dt", "-0.01"]),
+    ({"dt": 0.01, "runs": 0}, ["simulate runs", "found 0"]), ({"dt": 0.01, "duration": -5.0}, ["simulate duration"]),
+])
+def test_the_simulator_names_a_bad_argument(kwargs, words):
+    tr = tj.Trajectory(0.6, 0.0, 0.0, duration=10.0)
+    with pytest.raises(ValueError) as exc:
+        imu.simulate(tr, imu.PRESETS["tactical"], **kwargs)
+    _one_line(exc, *words)
+
+
+@pytest.mark.parametrize("kwargs, words", [({"duration": -5.0}, ["Trajectory duration", "-5"]),
+                                           ({"lon": float("nan")}, ["Trajectory lon", "nan"]),
+                                           ({"h": 1e9}, ["Trajectory h"])])
+def test_a_trajectory_names_a_bad_argument(kwargs, words):
+    with pytest.raises(ValueError) as exc:
+        tj.Trajectory(**{"lat": 0.6, "lon": 0.0, "h": 0.0, **kwargs})
+    _one_line(exc, *words)
