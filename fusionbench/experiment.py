@@ -70,7 +70,7 @@ def available_experiments():
 def load_experiment(name: str, where: str = "experiment") -> Experiment:
     """The registered experiment ``name``; ValueError naming ``where`` and the registered names otherwise."""
     eps = available_experiments()
-    if name not in eps:
+    if not isinstance(name, str) or name not in eps:
         raise ValueError(f"{where}: expected one of {sorted(eps)}, found {name!r}")
     return eps[name].load()()
 

@@ -202,6 +202,8 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     mo = data.get("motion", {})
     s = f"{src} [motion]"
     segs = []
+    if not isinstance(mo.get("segments", []), list):
+        raise ScenarioError(f"{_where(src, 'motion.segments')}: expected a list of tables, found {mo['segments']!r}")
     for i, it in enumerate(mo.get("segments", [])):
         if not isinstance(it, dict) or set(it) != {"accel_mps2", "duration_s"}:
             raise ScenarioError(f"{_where(src, f'motion.segments[{i}]')}: expected accel_mps2 and duration_s, found {it!r}")
@@ -237,6 +239,8 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     except ValueError as exc:  # a feature's own message, as every scenario error: one line
         raise ScenarioError(str(exc).splitlines()[0]) from None
     variants = data.get("variants", {})
+    if not isinstance(variants, dict):
+        raise ScenarioError(f"{_where(src, 'variants')}: expected tables [variants.NAME], found {variants!r}")
     experiment = data.get("experiment", "alignment")
     exp = _experiment(experiment, src)
     for vname, opts in variants.items():

@@ -1,0 +1,134 @@
+"""Property tests of the boundary (issue 14): whatever a file or a scenario mapping holds, the readers and the
+scenario parser either return a valid result or raise their one-line error naming the file; never another
+exception, never a result with non-finite samples."""
+
+import io
+import os
+import tempfile
+import zipfile
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fusionbench import scenarios
+from fusionbench.imufiles import IMUFileError, read_imu
+
+#: Examples per property (FUZZ_EXAMPLES=2000 for a deeper search than the suite's).
+EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
+SETTINGS = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+_DIR = tempfile.mkdtemp(prefix="fusionbench-fuzz-")
+
+
+def _read(name, payload):
+    path = os.path.join(_DIR, name)
+    with open(path, "wb") as fh:
+        fh.write(payload)
+    try:
+        imu, meta = read_imu(path)
+    except IMUFileError as exc:
+        msg = str(exc)
+        assert msg.startswith(path) and "\n" not in msg, msg
+        return None
+    assert np.isfinite(imu.t).all() and np.isfinite(imu.gyro).all() and np.isfinite(imu.accel).all()
+    assert np.all(np.diff(imu.t) > 0)
+    return imu
+
+
+_cell = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**25, 10**25),
+                  st.text(alphabet="0123456789.-+eEnaif ", max_size=8))
+
+
+@SETTINGS
+@given(st.lists(st.lists(_cell, min_size=0, max_size=8), min_size=0, max_size=12),
+       st.sampled_from(["t,gx,gy,gz,ax,ay,az", "t,gx,gy,gz,ax,ay", "", "time,a,b"]))
+def test_any_csv_is_read_or_refused_in_one_line(rows, header):
+    text = header + "\n" + "\n".join(",".join(str(c) for c in r) for r in rows) + "\n"
+    _read("fuzz.csv", text.encode())
+
+
+@SETTINGS
+@given(st.binary(max_size=300))
+def test_any_bytes_as_any_format_are_read_or_refused_in_one_line(payload):
+    for name in ("fuzz.csv", "fuzz.imu", "fuzz.npz"):
+        _read(name, payload)
+
+
+_arrays = st.one_of(
+    st.builds(lambda n, v: np.full((n, 3), v), st.integers(0, 5), st.floats(allow_nan=True, allow_infinity=True)),
+    st.builds(lambda n: np.arange(n, dtype=float) * 0.01, st.integers(0, 5)),
+    st.builds(lambda n: np.zeros((n, 2)), st.integers(0, 4)),
+    st.just(np.array(["a", "b"])), st.just(np.zeros((3, 3), dtype=complex)), st.just(np.array(7)),
+)
+
+
+@SETTINGS
+@given(st.dictionaries(st.sampled_from(["t", "gyro", "accel", "x"]), _arrays, max_size=4))
+def test_any_npz_arrays_are_read_or_refused_in_one_line(arrays):
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    _read("fuzz.npz", buf.getvalue())
+
+
+@SETTINGS
+@given(st.lists(st.lists(st.one_of(st.integers(-10**20, 10**20), st.floats(), st.text("0123456789.-e", max_size=6)),
+                         min_size=0, max_size=7), min_size=0, max_size=8))
+def test_any_psins_text_is_read_or_refused_in_one_line(rows):
+    head = "0 0 0 0 0 0\n34 108 100 0 10 9.78\n0.01 0.01 0.01 10 10 10\n"
+    _read("fuzz.imu", (head + "\n".join(" ".join(str(c) for c in r) for r in rows) + "\n").encode())
+
+
+def test_a_zip_that_is_not_an_npz_is_refused():
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        z.writestr("t.npy", b"not an array")
+    assert _read("zip.npz", buf.getvalue()) is None
+
+
+_values = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(),
+                                 st.text(max_size=6)),
+                       lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                               st.dictionaries(st.text(max_size=6), inner, max_size=3)), max_leaves=8)
+_BASE = {"name": "f", "duration_s": 30.0, "rate_hz": 50.0, "runs": 2, "methods": ["coarse"], "site": {"lat_deg": 34.0}}
+_KEYS = {
+    "": ["duration_s", "rate_hz", "runs", "methods", "kind", "experiment", "name", "zzz"],
+    "site": ["lat_deg", "lon_deg", "height_m"],
+    "attitude": ["pitch_deg", "roll_deg", "heading_deg", "sway_amplitude_deg", "sway_frequency_hz", "sway_phase_deg"],
+    "motion": ["start_s", "segments", "disturbance_rms_mps", "disturbance_band_hz"],
+    "imu": ["preset", "gyro_bias_dph", "arw_dpsh", "schedule", "random"],
+    "vref": ["sigma_mps", "schedule"],
+    "init": ["misalignment_deg"],
+    "metrics": ["settling_band_arcmin", "jump_window_s", "rmse_window_s", "amplitude_windows_s", "compare"],
+    "quick": ["duration_s", "runs"],
+    "paper": ["reference", "note", "settling_time_s"],
+}
+
+
+@settings(max_examples=5 * EXAMPLES, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(sorted(_KEYS)), st.integers(0, 9), _values), min_size=1, max_size=4))
+def test_any_scenario_mapping_is_parsed_or_refused_in_one_line(edits):
+    data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in _BASE.items()}
+    for table, i, value in edits:
+        keys = _KEYS[table]
+        key = keys[i % len(keys)]
+        if table:
+            if not isinstance(data.get(table), dict):
+                data[table] = {}
+            data[table][key] = value
+        else:
+            data[key] = value
+    try:
+        scn = scenarios._parse_any(data, "fuzz.toml")
+    except scenarios.ScenarioError as exc:
+        assert str(exc).startswith("fuzz.toml") and "\n" not in str(exc), str(exc)
+        return
+    assert scn.name and scn.methods
+
+
+@pytest.mark.parametrize("n", [0, 1])
+def test_an_empty_or_one_sample_file_is_refused(tmp_path, n):
+    p = tmp_path / "short.csv"
+    p.write_text("t,gx,gy,gz,ax,ay,az\n" + "0.01,0,0,0,0,0,9.8\n" * n)
+    with pytest.raises(IMUFileError, match="short.csv"):
+        read_imu(p)
