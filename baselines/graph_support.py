@@ -16,11 +16,12 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench.attitude import orthonormalize, rotvec_to_dcm, skew
-from fusionbench.strapdown import rodrigues
+from fusionbench.strapdown import coning_sculling, rodrigues
 
 
 def compensated_increments(dtheta, dvel):
-    """Coning- and sculling-compensated increments (the two-sample form of :mod:`fusionbench.strapdown`).
+    """Coning- and sculling-compensated increments of one recording
+    (:func:`fusionbench.strapdown.coning_sculling` from rest: no sample before the first).
 
     Parameters
     ----------
@@ -34,11 +35,9 @@ def compensated_increments(dtheta, dvel):
     dv : ndarray, shape (M, 3)
         Velocity increment resolved in the body frame at the start of the interval, m/s.
     """
-    th_prev = np.vstack([np.zeros((1, 3)), dtheta[:-1]])
-    dv_prev = np.vstack([np.zeros((1, 3)), dvel[:-1]])
-    phi = dtheta + np.cross(th_prev, dtheta) / 12.0
-    dv = dvel + 0.5 * np.cross(dtheta, dvel) + (np.cross(th_prev, dvel) + np.cross(dv_prev, dtheta)) / 12.0
-    return phi, dv
+    zero = np.zeros((1, 3))
+    phi, dv = coning_sculling(np.asarray(dtheta)[None], np.asarray(dvel)[None], zero, zero)
+    return phi[0], dv[0]
 
 
 def keyframe_counts(samples, per_keyframe):
