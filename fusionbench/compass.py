@@ -37,27 +37,6 @@ def check_compass_latitude(lat, method):
                          f"rate vanishes toward the poles), found {np.degrees(lat):.3f} deg")
 
 
-def azimuth_from_commands(w_cE, w_cN, alpha_x, alpha_y, lat, eps_E=0.0, eps_N=0.0):
-    """Azimuth error az (rad, in (-pi, pi]) from level commands, eq. (19).
-
-    Parameters
-    ----------
-    w_cE, w_cN : array_like
-        Steady commanded rates about east and north, rad/s.
-    alpha_x, alpha_y : array_like
-        Level error estimates (Euler platform angles about east and north), rad.
-    lat : float
-        Latitude, rad.
-    eps_E, eps_N : array_like, optional
-        Gyro bias estimates, rad/s (unknown in practice: 0).
-    """
-    wN = earth.OMEGA_IE * np.cos(lat)
-    wU = earth.OMEGA_IE * np.sin(lat)
-    s = (np.asarray(w_cE) + np.asarray(alpha_y) * wU - eps_E) / wN
-    c = 1.0 + (np.asarray(w_cN) - np.asarray(alpha_x) * wU - eps_N) / wN
-    return np.arctan2(s, c)
-
-
 class AzimuthFit:
     """Least-squares form of eq. (19): the azimuth error from the level channels over the whole record.
 
@@ -70,21 +49,21 @@ class AzimuthFit:
 
     Eq. 19 reads sin(az) and cos(az) off the steady commands. Here the level angles in the coupling
     terms are replaced by the velocity equations (``g ay wU = wU (nabE - dvE' + ...)``), which turns
-    them into integrals of the measured velocity; and az(t) = az0 - A(t), where A is the azimuth
-    turned so far by the aligner itself (one-shot corrections, azimuth commands), known exactly.
-    With S = sin(az0), C = cos(az0), P and Q the double integrals of cos A and sin A, D_E and D_N
-    those of the commands and V the integrals of the velocity errors, the signals::
+    them into integrals of the measured velocity. With S = sin(az), C = cos(az), P = tau^2 / 2 the
+    double integral of 1 over the window, D_E and D_N the double integrals of the commands and V the
+    integrals of the velocity errors, the signals::
 
-        yN = dvN + 3 wU V_E - g D_E                  = c0N + c1N tau - gwN (S P - C Q) + bN tau^2
-        yE = dvE - 3 wU V_N + g D_N + g wN tau^2 / 2 = c0E + c1E tau + gwN (C P + S Q) + bE tau^2
+        yN = dvN + 3 wU V_E - g D_E                  = c0N + c1N tau - gwN S P + bN tau^2
+        yE = dvE - 3 wU V_N + g D_N + g wN tau^2 / 2 = c0E + c1E tau + gwN C P + bE tau^2
 
     are linear in [c0N, c1N, c0E, c1E, S, C] but for the bias terms b (gyro and accelerometer
     biases: -g epsE/2 + wU nabE/2, ...), which cannot be told apart from S and C on a stationary
     base and so stay in them: the azimuth limit -epsE / wN + tan L nabE / g. The least-squares
-    solution over the growing window gives az0 = atan2(S, C) from any heading, without waiting for
-    the loops to be steady, and keeps every sample's information across the aligner's own
-    corrections. Velocity corrections a loop applies itself (a classical damping term) must be added
-    back to the velocity it passes in (terms of order wU^2 are neglected).
+    solution over the growing window gives az = atan2(S, C) from any heading, without waiting for
+    the loops to be steady. The azimuth must not change during the fit: the aligners turn the loop's
+    attitude only after it (the PID's one-shot correction ends its fit; the ADRC turns only the
+    attitude it reports). Velocity corrections a loop applies itself (a classical damping term) must be
+    added back to the velocity it passes in (terms of order wU^2 are neglected).
 
     Parameters
     ----------
@@ -106,19 +85,13 @@ class AzimuthFit:
         self.wU = earth.OMEGA_IE * np.sin(lat)
         self.R = runs
         self.n = 0
-        self.A = np.zeros(runs)            # azimuth turned by the aligner so far, rad
-        self.I = np.zeros((runs, 4))       # integrals of [w_cE, w_cN, cos A, sin A]
-        self.D = np.zeros((runs, 4))       # double integrals of the same
+        self.I = np.zeros((runs, 3))       # integrals of [w_cE, w_cN, 1]
+        self.D = np.zeros((runs, 3))       # double integrals of the same
         self.V = np.zeros((runs, 2))       # integrals of [dvE, dvN] (coupling and Coriolis terms)
         self._prev_dv = None
         self.t_sums = np.zeros(3)          # sums of tau^0, tau^1, tau^2
-        # per-run sums: P, tau P, Q, tau Q, P^2, Q^2, P Q, yN, tau yN, yE, tau yE, P yN, Q yN, P yE, Q yE
-        self.sums = np.zeros((runs, 15))
-
-    def turned(self, angle):
-        """Record that the aligner turned its attitude by ``angle`` (R,) rad about up, C <- Rz(angle) C
-        (an azimuth command w_cU over dt turns it by -w_cU dt)."""
-        self.A = self.A + angle
+        # per-run sums: P, tau P, P^2, yN, tau yN, yE, tau yE, P yN, P yE
+        self.sums = np.zeros((runs, 9))
 
     def add(self, dv_en, w_c_en):
         """Add one period.
@@ -132,54 +105,43 @@ class AzimuthFit:
         """
         h = self.h
         if self.n:
-            rate = np.empty((self.R, 4))
+            rate = np.empty((self.R, 3))
             rate[:, :2] = w_c_en
-            rate[:, 2] = np.cos(self.A)
-            rate[:, 3] = np.sin(self.A)
+            rate[:, 2] = 1.0
             self.D += self.I * h + 0.5 * rate * h * h
             self.I += rate * h
             self.V += 0.5 * (self._prev_dv + dv_en) * h
         self._prev_dv = dv_en.copy()
         tau = self.n * h / self._SCALE
         g = self.g
-        P, Q = self.D[:, 2] / self._SCALE**2, self.D[:, 3] / self._SCALE**2
+        P = self.D[:, 2] / self._SCALE**2
         cross = 3.0 * self.wU * self.V  # level coupling (1x) and Coriolis (2x) terms, integrated
         yN = dv_en[:, 1] + cross[:, 0] - g * self.D[:, 0]
         yE = dv_en[:, 0] - cross[:, 1] + g * self.D[:, 1] + 0.5 * g * self.wN * (self.n * h) ** 2
         self.t_sums += (1.0, tau, tau * tau)
-        self.sums += np.stack([P, tau * P, Q, tau * Q, P * P, Q * Q, P * Q, yN, tau * yN, yE, tau * yE,
-                               P * yN, Q * yN, P * yE, Q * yE], axis=-1)
+        self.sums += np.stack([P, tau * P, P * P, yN, tau * yN, yE, tau * yE, P * yN, P * yE], axis=-1)
         self.n += 1
 
-    def initial_azimuth(self):
-        """az0 (R,) rad: the azimuth error at the window start, or NaN before 4 samples."""
+    def azimuth(self):
+        """The azimuth error az (R,) rad, in (-pi, pi], or NaN before 4 samples."""
         if self.n < 4:
             return np.full(self.R, np.nan)
         k = self.g * self.wN * self._SCALE**2
         s0, s1, s2 = self.t_sums
-        P, tP, Q, tQ, PP, QQ, PQ, yN, tyN, yE, tyE, PyN, QyN, PyE, QyE = np.moveaxis(self.sums, -1, 0)
-        # rows of xN = [1, tau, 0, 0, -k P, k Q] and xE = [0, 0, 1, tau, k Q, k P], summed products
+        P, tP, PP, yN, tyN, yE, tyE, PyN, PyE = np.moveaxis(self.sums, -1, 0)
+        # rows of xN = [1, tau, 0, 0, -k P, 0] and xE = [0, 0, 1, tau, 0, k P], summed products
         M = np.zeros((self.R, 6, 6))
         M[:, 0, 0] = M[:, 2, 2] = s0
         M[:, 0, 1] = M[:, 1, 0] = M[:, 2, 3] = M[:, 3, 2] = s1
         M[:, 1, 1] = M[:, 3, 3] = s2
         M[:, 0, 4] = M[:, 4, 0] = -k * P
-        M[:, 0, 5] = M[:, 5, 0] = k * Q
         M[:, 1, 4] = M[:, 4, 1] = -k * tP
-        M[:, 1, 5] = M[:, 5, 1] = k * tQ
-        M[:, 2, 4] = M[:, 4, 2] = k * Q
         M[:, 2, 5] = M[:, 5, 2] = k * P
-        M[:, 3, 4] = M[:, 4, 3] = k * tQ
         M[:, 3, 5] = M[:, 5, 3] = k * tP
-        M[:, 4, 4] = M[:, 5, 5] = k * k * (PP + QQ)
-        M[:, 4, 5] = M[:, 5, 4] = 0.0  # -k^2 P Q + k^2 Q P
-        b = np.stack([yN, tyN, yE, tyE, k * (QyE - PyN), k * (QyN + PyE)], axis=-1)
+        M[:, 4, 4] = M[:, 5, 5] = k * k * PP
+        b = np.stack([yN, tyN, yE, tyE, -k * PyN, k * PyE], axis=-1)
         theta = np.linalg.solve(M, b[..., None])[..., 0]
-        return np.arctan2(theta[:, 4], theta[:, 5])
-
-    def azimuth(self):
-        """The azimuth error now, az0 - A (R,) rad."""
-        return np.angle(np.exp(1j * (self.initial_azimuth() - self.A)))
+        return np.angle(np.exp(1j * np.arctan2(theta[:, 4], theta[:, 5])))
 
 
 def correct_azimuth(C_bn, alpha_z):
