@@ -94,10 +94,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, variant
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, variant
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
-from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
 from fusionbench.strapdown import rodrigues
 
 from .primitives import ExtendedStateObserver, nlsef
@@ -193,7 +193,7 @@ def level_noise(method, dt, sigma_v=0.0, arw=0.0, vrw=0.0, g=9.8):
     return float(np.sqrt(c_loop @ P @ c_loop)), float(np.sqrt(c_obs @ P @ c_obs))
 
 
-class ADRCGyrocompass:
+class ADRCGyrocompass(AlignerBase):
     """ADRC gyrocompass (method ``adrc``): the levels read off the ESO, the azimuth off the commands.
 
     The defaults are this project's working configuration (see the module docstring);
@@ -237,6 +237,7 @@ class ADRCGyrocompass:
     description = ("ADRC gyrocompass (seed 000): ESO/NLSEF level loops with the level read off the ESO, azimuth "
                    "from the steady commands (eq. 19, least squares)")
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=80.0)
+    max_latitude_deg = MAX_LATITUDE_DEG
 
     def __init__(self, h=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  eso_bandwidth=0.13, r1=None, c1=0.8, h1=4.0, level="observer", fit_from_s=10.0, shot_s=40.0,
@@ -272,11 +273,10 @@ class ADRCGyrocompass:
         """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (eqs. 17-18)."""
         return [(float(self.shot_s), "azimuth shot")]
 
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
-        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
-        loop = start_loop(self, imu, site, vref, init, self.h)
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
+        ``init`` the loop starts levelled with yaw 0."""
+        loop = CommandLoop(imu, site, init, self.h, vref)
         h, R, g = loop.period, loop.R, site.g
         A, _, _, _ = level_loop_model(self, imu.dt, g)
         rho = float(np.max(np.abs(np.linalg.eigvals(A))))

@@ -270,13 +270,12 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, coarse_then_fine,
-                                 check_not_accelerating, initial_attitude, variant)
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_not_accelerating, coarse_then_fine, variant
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.compass import check_compass_latitude
+from fusionbench.compass import MAX_LATITUDE_DEG
 from fusionbench.strapdown import NavState, Strapdown
 
 from .primitives import FSTTrackingDifferentiator, SecondOrderESO, fst  # noqa: F401 (re-exported)
@@ -362,18 +361,8 @@ class LeastSquaresDifferentiator:
         self.S[4] = self.S[4] + alpha * S1 + d_slope * S2
 
 
-class _WithReference:
-    """A coarse aligner run on the first part of a record with the matching part of the reference."""
-
-    def __init__(self, coarse, vref):
-        self.coarse, self.vref = coarse, vref
-
-    def align(self, imu, site, vref=None, init=None):
-        return self.coarse.align(imu, site, vref=None if self.vref is None else self.vref[:, :imu.samples])
-
-
 # ---------------------------------------------------------------------------------------- aligner
-class ESOTDAligner:
+class ESOTDAligner(AlignerBase):
     """ESO/TD moving-base alignment (method ``eso-td``), seed 001; :data:`PAPER_PARAMETERS` are the paper's.
 
     Parameters
@@ -438,6 +427,7 @@ class ESOTDAligner:
     name = "eso-td"
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.7 arcmin from the limit (conformance)
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05)
+    max_latitude_deg = MAX_LATITUDE_DEG  # eq. 12 divides by the horizontal earth rate
     description = ("ESO/TD alignment (seed 001): 2nd-order ESO per level velocity channel, the azimuth from "
                    "eq. 12's derivative (least-squares TD); moving base with a velocity reference, static or swaying without")
 
@@ -522,7 +512,7 @@ class ESOTDAligner:
         alignment at ``coarse_s`` (s), when no initial attitude is given."""
         return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
 
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
         """Align R recordings on a moving base with a velocity reference, or on a static or swaying base
         without one; see the module docstring.
 
@@ -540,23 +530,18 @@ class ESOTDAligner:
             20', 20', 40'). None: an inertial-frame coarse alignment over the first ``coarse_s`` seconds
             first (with the reference when there is one; without, it refuses a moving base).
         """
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
         t, dth, dvel = imu.increments()
         R = imu.runs
-        if init is None:  # any heading: inertial-frame coarse alignment first
+        if init is None:  # any heading: inertial-frame coarse alignment first (with the reference, if any)
             coarse = InertialCoarseAligner(history_points=20, max_gravity_excess=self.max_gravity_excess,
                                            caller=self.name)
-            return coarse_then_fine(imu, site, vref, _WithReference(coarse, vref), self.coarse_s,
-                                    lambda rest, vr, C0: self.align(rest, site, vr, C0))
-        check_compass_latitude(site.lat, self.name)
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, "
-                             f"found {imu.duration:g} s")
+            # the fine stage through align: the input policy again, on the rest of the record
+            return coarse_then_fine(imu, site, vref, coarse, self.coarse_s,
+                                    lambda rest, vr, C0, v0: self.align(rest, site, vr, C0))
         if vref is None:
             self._check_not_accelerating(dvel, imu.dt, site)
         dt = imu.dt
-        C0 = initial_attitude(init, R)
+        C0 = init
         if vref is None:
             vref = np.zeros((R, t.size, 3))
         m = max(1, int(round(self.T / dt)))

@@ -45,10 +45,10 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
-from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
 
 
 def sigma_of(td, xi):
@@ -71,7 +71,7 @@ def compass_gains(td, xi, ws2, g):
     return 2 * s, 4 * s**2 / ws2 - 1, 4 * s**4 / g, 2 * s
 
 
-class PIDGyrocompass:
+class PIDGyrocompass(AlignerBase):
     """Classical gyrocompass (method ``pid``): third-order level loops and a compass loop, staged.
 
     Parameters
@@ -96,7 +96,9 @@ class PIDGyrocompass:
     # up to 70 deg: at 75 deg under seed 000's sway with a 0.05 m/s reference its azimuth ends 6 bounds off;
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.9 arcmin from the limit (conformance)
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=70.0, max_bias_ratio=0.05)
+    max_latitude_deg = MAX_LATITUDE_DEG
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
+
     def __init__(self, period=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
                  compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None):
         self.spec = None if imu is None else load_spec(imu)
@@ -114,11 +116,10 @@ class PIDGyrocompass:
         fitted azimuth) and the closing of the compass loop."""
         return [(float(self.shot_s), "azimuth shot"), (self.compass_stages[0][0], "compass loop closed")]
 
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
-        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
-        loop = start_loop(self, imu, site, vref, init, self.period)
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
+        ``init`` the loop starts levelled with yaw 0."""
+        loop = CommandLoop(imu, site, init, self.period, vref)
         h, R, g = loop.period, loop.R, site.g
         rm, rn = earth.radii(site.lat)
         radius = np.sqrt(rm * rn) + site.h

@@ -33,9 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable,
-                                 initial_attitude)
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, azimuth_bias_ratio, coarse_then_fine
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
@@ -73,7 +72,7 @@ def discretize(F, Qc, T):
     return Phi, Qc * T + (FQ + np.swapaxes(FQ, -1, -2)) * T * T / 2
 
 
-class KalmanAligner:
+class KalmanAligner(AlignerBase):
     """Kalman fine alignment (method ``kf``) on filterpy, feedback-corrected strapdown.
 
     Parameters
@@ -106,6 +105,7 @@ class KalmanAligner:
     # not moving: on the 0.1 g moving base it ends 1.3-1.7 bounds off with a -1.2 to -1.4 arcmin mean azimuth offset
     # whatever the heading (gtsam 1.0 on the same data); not tactical gyros: 1.5-2.1 bounds off (conformance)
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=89.0, max_bias_ratio=0.05)
+    max_latitude_deg = 89.0
     description = "Kalman fine alignment (11-state psi-angle model, filterpy arithmetic batched over runs, feedback), coarse start"
 
     def __init__(self, rate_hz=10.0, imu="navigation", vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0,
@@ -168,33 +168,27 @@ class KalmanAligner:
         bank.update(z)
 
     # ---------------------------------------------------------------- alignment
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
-        """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None)."""
-        vref, init = check_inputs(imu, vref, init, self.name)
-        if abs(np.degrees(site.lat)) > 89.0:
-            raise ValueError(f"latitude: {self.name} needs |latitude| <= 89 deg, found {np.degrees(site.lat):.3f} deg")
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
-        check_azimuth_observable(self.spec, site, self.name)
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+        """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None): from ``init``, or
+        after an inertial-frame coarse alignment over the first ``coarse_s`` seconds."""
+        if init is not None:
+            return self._fine(imu, site, vref, init, np.zeros((imu.runs, 3)) if vref is None else vref[:, 0], imu.dt)
+        coarse = InertialCoarseAligner(history_points=20, caller=self.name)
+        # the fine stage keeps the whole record's sample interval (the rest's own, from its span, differs in the
+        # last bits) and starts at the reference velocity at the hand-over
+        return coarse_then_fine(imu, site, vref, coarse, self.coarse_s, lambda rest, vr, C0, v0: self._fine(
+            rest, site, vr, C0, np.zeros((imu.runs, 3)) if v0 is None else v0, imu.dt))
+
+    def _fine(self, imu, site, vref, C0, v0, dt) -> AlignmentResult:
+        """The filter around the feedback-corrected strapdown from attitude ``C0`` (R, 3, 3) and velocity ``v0``
+        (R, 3) m/s ENU, with sample interval ``dt`` (s)."""
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
-        C0 = initial_attitude(init, R)
-        k0 = 0
-        hist_t, hist_C, hist_s = [], [], []
-        if C0 is None:  # coarse alignment on the first coarse_s seconds, then fine alignment from there
-            k0 = int(round(self.coarse_s / imu.dt))
-            coarse = InertialCoarseAligner(history_points=20, caller=self.name).align(
-                imu.__class__(t[:k0], dth[:, :k0], dv[:, :k0]), site, vref=None if vref is None else vref[:, :k0])
-            C0 = coarse.C_bn_final
-            hist_t.append(coarse.t)
-            hist_C.append(coarse.C_bn)
-            hist_s.append(np.full(coarse.C_bn.shape[:2] + (3,), np.nan))
-        v0 = np.zeros((R, 3)) if vref is None else vref[:, max(k0 - 1, 0)]
-        sd = Strapdown(NavState.broadcast(R, C0, v0, site.lat, site.lon, site.h), imu.dt, height_fixed=True)
-        m = max(1, int(round(1.0 / (self.rate_hz * imu.dt))))
-        T = m * imu.dt
-        steps = (N - k0) // m
-        tail = N - k0 - steps * m  # samples after the last filter step, integrated at the end (time rule)
+        sd = Strapdown(NavState.broadcast(R, C0, v0, site.lat, site.lon, site.h), dt, height_fixed=True)
+        m = max(1, int(round(1.0 / (self.rate_hz * dt))))
+        T = m * dt
+        steps = N // m
+        tail = N - steps * m  # samples after the last filter step, integrated at the end (time rule)
         qc = self._qc()
         P0 = self._p0(site.lat)
         bank = self._new_bank(R, P0)
@@ -204,9 +198,9 @@ class KalmanAligner:
         out_C = np.empty((R, steps + (tail > 0), 3, 3))
         out_s = np.empty((R, steps + (tail > 0), 3))
         for j in range(steps):
-            a, b = k0 + j * m, k0 + (j + 1) * m
-            g_in = dth[:, a:b] - eps_hat[:, None] * imu.dt
-            a_in = dv[:, a:b] - nab_hat[:, None] * imu.dt
+            a, b = j * m, (j + 1) * m
+            g_in = dth[:, a:b] - eps_hat[:, None] * dt
+            a_in = dv[:, a:b] - nab_hat[:, None] * dt
             C_prev = sd.state.C_bn.copy()
             sd.run(g_in, a_in, record_every=m)
             st = sd.state
@@ -233,14 +227,10 @@ class KalmanAligner:
             out_C[:, j] = st.C_bn
         if tail:  # the last samples, through the bias-compensated strapdown without an update
             a = N - tail
-            sd.run(dth[:, a:] - eps_hat[:, None] * imu.dt, dv[:, a:] - nab_hat[:, None] * imu.dt, record_every=tail)
+            sd.run(dth[:, a:] - eps_hat[:, None] * dt, dv[:, a:] - nab_hat[:, None] * dt, record_every=tail)
             out_t[-1], out_C[:, -1], out_s[:, -1] = t[-1], sd.state.C_bn, out_s[:, -2] if steps else np.nan
-        hist_t.append(out_t)
-        hist_C.append(out_C)
-        hist_s.append(out_s)
-        return AlignmentResult(self.name, np.concatenate(hist_t), np.concatenate(hist_C, axis=1),
-                               {"gyro_bias": eps_hat, "accel_bias": nab_hat},
-                               sigma_phi=np.concatenate(hist_s, axis=1), imu_model=self.spec.name)
+        return AlignmentResult(self.name, out_t, out_C, {"gyro_bias": eps_hat, "accel_bias": nab_hat}, sigma_phi=out_s,
+                               imu_model=self.spec.name)
 
 
 class AdaptiveKalmanAligner(KalmanAligner):

@@ -26,15 +26,9 @@ from . import earth
 from .attitude import euler_to_dcm
 from .strapdown import NavState, Strapdown
 
-#: Gyrocompasses lose the compass effect toward the poles (wN = OMEGA_IE cos L -> 0).
+#: Highest |latitude| of the gyrocompass-type aligners, deg (their ``max_latitude_deg``): they lose the compass
+#: effect toward the poles (wN = OMEGA_IE cos L -> 0).
 MAX_LATITUDE_DEG = 80.0
-
-
-def check_compass_latitude(lat, method):
-    """Raise ValueError (one line) when |lat| (rad) exceeds MAX_LATITUDE_DEG."""
-    if abs(np.degrees(lat)) > MAX_LATITUDE_DEG:
-        raise ValueError(f"latitude: {method} needs |latitude| <= {MAX_LATITUDE_DEG:g} deg (the horizontal earth "
-                         f"rate vanishes toward the poles), found {np.degrees(lat):.3f} deg")
 
 
 class AzimuthFit:
@@ -174,17 +168,6 @@ def level_guess(imu, seconds=1.0):
     return euler_to_dcm(np.stack([pitch, roll, np.zeros_like(pitch)], axis=-1))
 
 
-def start_loop(method, imu, site, vref, init, period):
-    """The checks every gyrocompass makes, then its :class:`CommandLoop`: latitude within
-    MAX_LATITUDE_DEG, at least ``method.min_duration_s`` of data, and the initial attitude ``init``
-    (R, 3, 3) or, when None, a levelled guess with yaw 0 (:func:`level_guess`)."""
-    check_compass_latitude(site.lat, method.name)
-    if imu.duration < method.min_duration_s:
-        raise ValueError(f"duration: {method.name} needs at least {method.min_duration_s:g} s, found {imu.duration:g} s")
-    C0 = None if init is None else np.broadcast_to(np.asarray(init, dtype=float), (imu.runs, 3, 3)).copy()
-    return CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, period, vref)
-
-
 class CommandLoop:
     """Strapdown on a stationary base, stepped one control period at a time with commanded rates.
 
@@ -194,8 +177,8 @@ class CommandLoop:
         The recordings (R runs).
     site : Site
         Position (held fixed).
-    C0 : ndarray, shape (R, 3, 3)
-        Initial attitude.
+    C0 : ndarray, shape (R, 3, 3), or None
+        Initial attitude; None: levelled from the first second of data with yaw 0 (:func:`level_guess`).
     period : float
         Control period, s; rounded to a whole number of samples.
     vref : ndarray, shape (R, M, 3), optional
@@ -229,7 +212,7 @@ class CommandLoop:
         if vref is not None:
             vref = np.asarray(vref, dtype=float)
             self.vref = vref[:, :steps * m].reshape(self.R, steps, m, 3).mean(axis=2).swapaxes(0, 1).copy()
-        state = NavState.broadcast(self.R, C0, lat=site.lat, lon=site.lon, h=site.h)
+        state = NavState.broadcast(self.R, level_guess(imu) if C0 is None else C0, lat=site.lat, lon=site.lon, h=site.h)
         self.sd = Strapdown(state, imu.dt, position_fixed=True)
         self.omega_c = np.zeros((self.R, 3))
 
