@@ -250,7 +250,7 @@ of an eastward speed; a tactical IMU's bias and scale errors 0.7 mg at most).
 
 The paper's configuration
 -------------------------
-:data:`PAPER_PARAMETERS` holds the printed values: T = 0.1 s, alpha = 1, delta = 2 h, beta11 = beta21
+:data:`PAPER_PARAMETERS` holds the printed values: T = h = 0.1 s (``step_s``), alpha = 1, delta = 2 h, beta11 = beta21
 = 0.6, beta12 = beta22 = 0.08 (read as continuous gains, above), TD h1 = 5 h, r = 500, the ESO started
 at rest (z1 = y, z2 = 0) with its fixed gains, and no attitude feedback: the paper reads eqs. 7, 9 and 12
 out as the estimates (section 3, "eqs. 3-15 make up the alignment loop"); nothing in them torques the
@@ -283,13 +283,13 @@ from .primitives import FSTTrackingDifferentiator, SecondOrderESO, fst  # noqa: 
 __all__ = ["fst", "FSTTrackingDifferentiator", "SecondOrderESO", "LeastSquaresDifferentiator", "ESOTDAligner",
            "PAPER_PARAMETERS", "expanding_memory_gains"]
 
-#: Seed 001's printed configuration (section 4): T = 0.1 s; ESO alpha1 = alpha2 = 1, delta1 = delta2 = 2 h,
+#: Seed 001's printed configuration (section 4): T = 0.1 s (the step, ``step_s``); ESO alpha1 = alpha2 = 1, delta1 = delta2 = 2 h,
 #: beta11 = beta21 = 0.6, beta12 = beta22 = 0.08 (continuous gains, see the module docstring); TD h1 = 5 h,
 #: r = 500; the ESO started at rest (z1 = y, z2 = 0) with fixed gains, eq. 12's derivative from the fst TD,
 #: and the estimates only read out, never fed back into the platform (eqs. 3-15 have no control term).
 #: ``ESOTDAligner(**PAPER_PARAMETERS)`` is the paper's aligner.
 PAPER_PARAMETERS = {
-    "T": 0.1,
+    "step_s": 0.1,
     "alpha1": 1.0, "alpha2": 1.0,
     "delta1": 0.2, "delta2": 0.2,        # 2 h
     "beta11": 0.6, "beta12": 0.08, "beta21": 0.6, "beta22": 0.08,
@@ -367,9 +367,10 @@ class ESOTDAligner(AlignerBase):
 
     Parameters
     ----------
-    T : float
-        ESO/TD step, s (0.1, the paper's sample period). Rounded to a whole number of IMU samples;
-        a faster IMU's velocities are averaged over each step, a slower one runs at its own interval.
+    step_s : float
+        ESO/TD step, s (0.1, the paper's sample period T; the step h of the discrete ESO and TD). Rounded to a
+        whole number of IMU samples; a faster IMU's velocities are averaged over each step, a slower one runs at
+        its own interval.
     alpha1, alpha2 : float
         fal exponents of the east and north ESO (1: linear).
     delta1, delta2 : float, optional
@@ -431,14 +432,14 @@ class ESOTDAligner(AlignerBase):
     description = ("ESO/TD alignment (seed 001): 2nd-order ESO per level velocity channel, the azimuth from "
                    "eq. 12's derivative (least-squares TD); moving base with a velocity reference, static or swaying without")
 
-    def __init__(self, T=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
+    def __init__(self, step_s=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
                  beta21=0.1, beta22=0.0025, eso_start="ls", td="ls", td_h1=None, td_r=500.0, td_start_s="auto",
                  td_min_s=10.0, td_memory_s=None, force_h1=5.0, feedback_from_s="auto", feedback_every_s=10.0,
                  feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3, imu=None):
         self.spec = None if imu is None else load_spec(imu)
-        self.T = float(T)
-        if not self.T > 0:
-            raise ValueError(f"T: expected a positive step in s, found {T}")
+        self.step_s = float(step_s)
+        if not self.step_s > 0:
+            raise ValueError(f"step_s: expected a positive step in s, found {step_s}")
         self.coarse_s = float(coarse_s)
         self.alpha = (float(alpha1), float(alpha2))
         self._delta = (delta1, delta2)
@@ -470,7 +471,7 @@ class ESOTDAligner(AlignerBase):
         self.feedback_limit = float(feedback_limit_deg) * np.pi / 180.0
         self.max_gravity_excess = float(max_gravity_excess)
         # the ESO's floor time: when the expanding-memory gains have fallen to beta (both of them)
-        self.eso_floor_s = self._eso_floor_time(self.T) if eso_start == "ls" else 0.0
+        self.eso_floor_s = self._eso_floor_time(self.step_s) if eso_start == "ls" else 0.0
         if isinstance(td_start_s, str):
             if td_start_s != "auto":
                 raise ValueError(f"td_start_s: expected a time in s or 'auto', found {td_start_s!r}")
@@ -481,13 +482,13 @@ class ESOTDAligner(AlignerBase):
             # derivative (12 time constants of the slow pole; the specific-force TD settles meanwhile,
             # 8 force_h1), then the TD's transient (8 h1)
             slow = min(_slow_rate(b1, b2) for b1, b2 in zip(self.beta1, self.beta2))
-            self.settle_s = float(np.ceil(max(12.0 / slow, 8.0 * self.force_h1) + 8.0 * self.td_h1_for(self.T)))
+            self.settle_s = float(np.ceil(max(12.0 / slow, 8.0 * self.force_h1) + 8.0 * self.td_h1_for(self.step_s)))
         else:
             self.settle_s = float(np.ceil(self.td_start_s + self.td_min_s))
         if isinstance(feedback_from_s, str):
             if feedback_from_s != "auto":
                 raise ValueError(f"feedback_from_s: expected a time in s, 'auto' or None, found {feedback_from_s!r}")
-            feedback_from_s = self.settle_s if td == "fst" else max(self.eso_floor_s, self.T)
+            feedback_from_s = self.settle_s if td == "fst" else max(self.eso_floor_s, self.step_s)
         self.feedback_from_s = None if feedback_from_s is None else float(feedback_from_s)
         self.min_duration_s = self.settle_s
 
@@ -544,7 +545,7 @@ class ESOTDAligner(AlignerBase):
         C0 = init
         if vref is None:
             vref = np.zeros((R, t.size, 3))
-        m = max(1, int(round(self.T / dt)))
+        m = max(1, int(round(self.step_s / dt)))
         h = m * dt
         steps = t.size // m
 

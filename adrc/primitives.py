@@ -7,6 +7,11 @@ and returns arrays of the broadcast shape; the classes keep their states as such
 
 Units follow the plant: for a gyrocompass level channel the output y is a velocity error (m/s), the
 control u a commanded angular rate (rad/s) and b0 = -g or +g (m/s^2 per rad).
+
+The step ``h`` of these discrete forms is Han's symbol, kept so that the code reads as the equations: it is the
+interval at which the aligner steps them, its ``step_s`` option (:class:`adrc.gyrocompass.ADRCGyrocompass`,
+:class:`adrc.moving_base.ESOTDAligner`) rounded to whole IMU samples. ``h0`` and ``h1`` are not steps but
+fhan's and fst's precision (filter) factors, s.
 """
 
 from __future__ import annotations

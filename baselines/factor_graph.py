@@ -11,7 +11,7 @@ The graph is a smoother (the result's ``causal`` is False): every keyframe's est
 
 The graph (one per recording)
 -----------------------------
-Keyframes ``k = 0 .. K-1`` lie every ``keyframe_s`` seconds from the initial state ``imu.t0``;
+Keyframes ``k = 0 .. K-1`` lie every ``step_s`` seconds (the graph's step) from the initial state ``imu.t0``;
 the last keyframe is the last sample (the final interval is between 0.5 and 1.5 keyframe
 intervals long). Each keyframe has a pose ``X(k)`` (``C_bn``, position) and a velocity ``V(k)``
 (ENU, m/s); bias keys ``B(j)`` (accelerometer m/s^2, gyro rad/s, body frame). Factors:
@@ -263,8 +263,8 @@ class FactorGraphAligner(AlignerBase):
 
     Parameters
     ----------
-    keyframe_s : float
-        Keyframe interval, s (default 1 s).
+    step_s : float
+        The graph's step: the keyframe interval, s (default 1 s), rounded to a whole number of IMU samples.
     imu : str, path, IMUSpec or None
         The sensor model (a preset name, an IMU spec TOML file or an IMUSpec, :func:`fusionbench.imu.load_spec`;
         default the ``navigation`` preset) from which the white-noise densities, the bias priors and the bias
@@ -335,14 +335,14 @@ class FactorGraphAligner(AlignerBase):
     #: Keys of the per-recording extras that are the same for every recording (kept once).
     _shared_extra = ("adapt_window_t",)
 
-    def __init__(self, keyframe_s=1.0, imu="navigation", gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
+    def __init__(self, step_s=1.0, imu="navigation", gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
                  accel_bias_sigma=None, vref_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
                  bias_interval_s=None, max_iterations=100, recompensate_rad=1e-3, max_passes=3, marginals=True,
                  huber_k=1.345, coarse=None, init_sigma_deg=None):
         if not (isinstance(vref_sigma, (int, float)) and np.isfinite(vref_sigma) and vref_sigma >= 0):
             raise ValueError(f"vref_sigma: expected a non-negative standard deviation in m/s, found {vref_sigma!r}")
         vref_sigma = max(float(vref_sigma), VREF_SIGMA_FLOOR)  # an exact reference: a well-conditioned factor
-        positive = dict(keyframe_s=keyframe_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
+        positive = dict(step_s=step_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
                         integration_sigma=integration_sigma, recompensate_rad=recompensate_rad, huber_k=huber_k,
                         bias_interval_s=30.0 if bias_interval_s is None else bias_interval_s)
         for key, val in positive.items():
@@ -367,7 +367,7 @@ class FactorGraphAligner(AlignerBase):
             self._positive("init_sigma_deg", init_sigma_deg), (3,)))
         self.coarse = InertialCoarseAligner() if coarse is None else coarse
         #: Shortest record, s: three keyframe intervals, and what the coarse initialisation needs.
-        self.min_duration_s = max(3.0 * self.keyframe_s, float(getattr(self.coarse, "min_duration_s", 0.0)))
+        self.min_duration_s = max(3.0 * self.step_s, float(getattr(self.coarse, "min_duration_s", 0.0)))
 
     @staticmethod
     def _positive(key, val):
@@ -640,7 +640,7 @@ class FactorGraphAligner(AlignerBase):
             sigmas, rad, ENU (with the bias priors; with the biases known); ``extra``: ``gyro_bias`` (R, 3) rad/s and ``accel_bias`` (R, 3)
             m/s^2, the estimated biases at the last keyframe, body frame; ``iterations``, ``passes``
             (R,) ints (LM iterations, graph builds); ``restarted`` (R,) bool (solved again from the
-            coarse alignment); ``graph_error`` (R,), the final cost; ``keyframe_s``; ``imu_model``
+            coarse alignment); ``graph_error`` (R,), the final cost; ``step_s``; ``imu_model``
             the IMU model's name (``"default"`` without one).
 
         Raises
@@ -650,13 +650,13 @@ class FactorGraphAligner(AlignerBase):
             beyond 89 deg, a record shorter than ``min_duration_s``, badly shaped ``vref`` or ``init``,
             non-finite samples), a keyframe interval shorter than the sample interval.
         """
-        if self.keyframe_s < imu.dt:
-            raise ValueError(f"{self.name}: keyframe_s: expected at least the sample interval {imu.dt:g} s, "
-                             f"found {self.keyframe_s:g} s")
+        if self.step_s < imu.dt:
+            raise ValueError(f"{self.name}: step_s: expected a keyframe interval of at least the sample interval "
+                             f"{imu.dt:g} s, found {self.step_s:g} s")
         init = None if init is None else orthonormalize(init)
         t_end, dth, dvel = imu.increments()
         M, dt, R = t_end.size, imu.dt, imu.runs
-        counts = keyframe_counts(M, max(1, int(round(self.keyframe_s / dt))))
+        counts = keyframe_counts(M, max(1, int(round(self.step_s / dt))))
         K = counts.size
         t_kf = np.concatenate([[imu.t0], t_end[counts[1:] - 1]])
         T = np.diff(counts) * dt
@@ -702,7 +702,7 @@ class FactorGraphAligner(AlignerBase):
                 sig[r], sig_noise[r] = marginal_sigmas(graph, values, C_kf, [B(j) for j in range(int(seg.max()) + 1)])
         extra = {"sigma_phi_noise": sig_noise, "gyro_bias": bg, "accel_bias": ba,
                  "iterations": iters, "passes": passes, "restarted": restarted, "graph_error": cost,
-                 "keyframe_s": self.keyframe_s}
+                 "step_s": self.step_s}
         for key in (per_run[0] if per_run else {}):
             stacked = np.stack([m[key] for m in per_run])
             extra[key] = stacked[0] if key in self._shared_extra else stacked

@@ -76,8 +76,8 @@ class PIDGyrocompass(AlignerBase):
 
     Parameters
     ----------
-    period : float
-        Control period, s.
+    step_s : float
+        Control step of the loops, s (rounded to a whole number of IMU samples).
     xi : float
         Damping ratio of the design (sqrt(2)/2).
     fit_from_s, shot_s : float
@@ -99,10 +99,10 @@ class PIDGyrocompass(AlignerBase):
     max_latitude_deg = MAX_LATITUDE_DEG
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
 
-    def __init__(self, period=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
+    def __init__(self, step_s=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
                  compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None):
         self.spec = None if imu is None else load_spec(imu)
-        self.period, self.xi = float(period), float(xi)
+        self.step_s, self.xi = float(step_s), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
         self.compass_stages = tuple(tuple(float(x) for x in st) for st in compass_stages)
         self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
@@ -119,8 +119,8 @@ class PIDGyrocompass(AlignerBase):
     def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
         ``init`` the loop starts levelled with yaw 0."""
-        loop = CommandLoop(imu, site, init, self.period, vref)
-        h, R, g = loop.period, loop.R, site.g
+        loop = CommandLoop(imu, site, init, self.step_s, vref)
+        h, R, g = loop.step_s, loop.R, site.g  # h: the step of the loops' Euler integration
         rm, rn = earth.radii(site.lat)
         radius = np.sqrt(rm * rn) + site.h
         ws2 = g / radius
@@ -170,7 +170,7 @@ class PIDGyrocompass(AlignerBase):
             loop.omega_c = cmd
             hist_t[j] = t
             hist_C[:, j] = loop.sd.state.C_bn
-        t_last = loop.finish()  # the samples after the last control period: the result ends at the last sample
+        t_last = loop.finish()  # the samples after the last control step: the result ends at the last sample
         if t_last is not None:
             hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot})

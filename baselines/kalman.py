@@ -1,7 +1,7 @@
 """Kalman fine alignment and its innovation-adaptive variant.
 
 After a coarse alignment (or from the scenario's initial guess), the shared strapdown runs on the
-IMU increments and an error-state filter per run estimates at ``rate_hz`` (the filters of all runs step
+IMU increments and an error-state filter per run estimates every ``step_s`` (the filters of all runs step
 together in a :class:`baselines.filter_bank.FilterBank`: filterpy's arithmetic on arrays over runs, or
 ``engine="filterpy"``, one :class:`filterpy.kalman.KalmanFilter` per run, the reference)::
 
@@ -13,7 +13,7 @@ gyro and accelerometer biases in the body frame, rad/s and m/s^2), with the psi-
     phi' = -[w_in x] phi - C_bn eps + w_g
     dv'  =  [f^n x] phi + C_bn nab - [(2 w_ie + w_en) x] dv + w_a      (east and north rows)
 
-the transition and process noise accumulated over the update interval (second-order expansion of
+the transition and process noise accumulated over the update interval T (``step_s``; second-order expansion of
 exp(F T) and of the Van Loan integral), and the measurement z = v_INS - v_ref (ENU, m/s; zero
 velocity on a stationary base). The update is filterpy's Joseph form. After each update the estimate is fed back: the attitude is
 turned by phi (C <- exp([phi x]) C), the velocity error removed, the biases added to the
@@ -77,8 +77,9 @@ class KalmanAligner(AlignerBase):
 
     Parameters
     ----------
-    rate_hz : float
-        Filter rate, Hz (10).
+    step_s : float
+        Filter step, s (0.1: 10 Hz), rounded to a whole number of IMU samples: the interval of its predictions
+        and updates.
     imu : str, path or IMUSpec
         Noise model of the filter (:func:`fusionbench.imu.load_spec`): a preset name, an IMU spec TOML
         file or an IMUSpec; default the ``navigation`` preset. Its white noises give Q; its bias sigmas
@@ -108,12 +109,14 @@ class KalmanAligner(AlignerBase):
     max_latitude_deg = 89.0
     description = "Kalman fine alignment (11-state psi-angle model, filterpy arithmetic batched over runs, feedback), coarse start"
 
-    def __init__(self, rate_hz=10.0, imu="navigation", vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0,
+    def __init__(self, step_s=0.1, imu="navigation", vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0,
                  engine="numpy"):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, found {engine!r}")
         self.engine = engine
-        self.rate_hz = float(rate_hz)
+        self.step_s = float(step_s)
+        if not (np.isfinite(self.step_s) and self.step_s > 0):
+            raise ValueError(f"step_s: expected a positive filter step in s, found {step_s!r}")
         self.spec = load_spec(imu)
         self.vref_sigma = float(vref_sigma)
         if not (np.isfinite(self.vref_sigma) and self.vref_sigma >= 0):
@@ -185,8 +188,8 @@ class KalmanAligner(AlignerBase):
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
         sd = Strapdown(NavState.broadcast(R, C0, v0, site.lat, site.lon, site.h), dt, height_fixed=True)
-        m = max(1, int(round(1.0 / (self.rate_hz * dt))))
-        T = m * dt
+        m = max(1, int(round(self.step_s / dt)))
+        T = m * dt  # the filter's update interval: step_s in whole samples
         steps = N // m
         tail = N - steps * m  # samples after the last filter step, integrated at the end (time rule)
         qc = self._qc()

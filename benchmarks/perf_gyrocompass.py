@@ -79,7 +79,7 @@ def aligners():
 
 
 def control_period(aligner):
-    return aligner.h if hasattr(aligner, "h") else aligner.period
+    return aligner.step_s
 
 
 def head(data, vref, init, runs, samples):

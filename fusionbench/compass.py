@@ -63,8 +63,8 @@ class AzimuthFit:
     ----------
     runs : int
         Batch size.
-    h : float
-        Control period, s (one ``add`` per period).
+    step_s : float
+        Control step of the loop, s (one ``add`` per step).
     lat : float
         Latitude, rad.
     g : float
@@ -73,8 +73,8 @@ class AzimuthFit:
 
     _SCALE = 100.0  # time unit of the fit, s (keeps the normal equations well conditioned)
 
-    def __init__(self, runs, h, lat, g):
-        self.h, self.lat, self.g = float(h), float(lat), float(g)
+    def __init__(self, runs, step_s, lat, g):
+        self.step_s, self.lat, self.g = float(step_s), float(lat), float(g)
         self.wN = earth.OMEGA_IE * np.cos(lat)
         self.wU = earth.OMEGA_IE * np.sin(lat)
         self.R = runs
@@ -88,16 +88,16 @@ class AzimuthFit:
         self.sums = np.zeros((runs, 9))
 
     def add(self, dv_en, w_c_en):
-        """Add one period.
+        """Add one step.
 
         Parameters
         ----------
         dv_en : ndarray, shape (R, 2)
-            Velocity errors [dvE, dvN] at the end of the period, m/s.
+            Velocity errors [dvE, dvN] at the end of the step, m/s.
         w_c_en : ndarray, shape (R, 2)
-            Commands [w_cE, w_cN] applied during the period, rad/s.
+            Commands [w_cE, w_cN] applied during the step, rad/s.
         """
-        h = self.h
+        h = self.step_s
         if self.n:
             rate = np.empty((self.R, 3))
             rate[:, :2] = w_c_en
@@ -169,7 +169,7 @@ def level_guess(imu, seconds=1.0):
 
 
 class CommandLoop:
-    """Strapdown on a stationary base, stepped one control period at a time with commanded rates.
+    """Strapdown on a stationary base, stepped one control step at a time with commanded rates.
 
     Parameters
     ----------
@@ -179,31 +179,31 @@ class CommandLoop:
         Position (held fixed).
     C0 : ndarray, shape (R, 3, 3), or None
         Initial attitude; None: levelled from the first second of data with yaw 0 (:func:`level_guess`).
-    period : float
-        Control period, s; rounded to a whole number of samples.
+    step_s : float
+        Control step, s; rounded to a whole number of samples (the attribute :attr:`step_s` is the rounded one).
     vref : ndarray, shape (R, M, 3), optional
         Reference velocity (ENU, m/s) at the end of each increment interval; zero if None. The
-        samples of each control period are averaged (the base is stationary, so this only filters
+        samples of each control step are averaged (the base is stationary, so this only filters
         the reference's noise).
 
-    Iterate over the loop: each step integrates one period with the current command and yields
+    Iterate over the loop: each step integrates ``m`` samples with the current command and yields
     ``(j, t, dv)``: step index, time (s) and velocity error (R, 3) m/s against the reference.
     Set :attr:`omega_c` (R, 3) rad/s before the next step; the attitude and velocity are in
     :attr:`sd` (``sd.state.C_bn``, ``sd.state.v_n``) and may be corrected between steps.
 
-    The periods cover ``steps * m`` samples; :meth:`finish` integrates the samples after the last whole
-    period (fewer than ``m``) with the command of the last period, so the loop's attitude reaches the last
+    The steps cover ``steps * m`` samples; :meth:`finish` integrates the samples after the last whole
+    step (fewer than ``m``) with the command of the last step, so the loop's attitude reaches the last
     sample (the time rule of :mod:`fusionbench.aligner`). ``records`` is the number of attitudes a history
-    with one entry per period and one for that tail holds.
+    with one entry per step and one for that tail holds.
     """
 
-    def __init__(self, imu, site, C0, period, vref=None):
+    def __init__(self, imu, site, C0, step_s, vref=None):
         self.t, dth, dv = imu.increments()
         self.R = dth.shape[0]
-        self.m = m = max(1, int(round(period / imu.dt)))
-        self.period = m * imu.dt
+        self.m = m = max(1, int(round(step_s / imu.dt)))
+        self.step_s = m * imu.dt
         self.steps = steps = self.t.size // m
-        # one contiguous block per control period: (steps, R, m, 3), so no step copies its slice
+        # one contiguous block per control step: (steps, R, m, 3), so no step copies its slice
         self.dth = np.ascontiguousarray(dth[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
         self.dv = np.ascontiguousarray(dv[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
         self._tail = (dth[:, steps * m:], dv[:, steps * m:])
@@ -221,17 +221,17 @@ class CommandLoop:
         for j in range(self.steps):
             self.sd.run(self.dth[j], self.dv[j], omega_cmd=self.omega_c, record_every=m)
             dv = self.sd.state.v_n
-            if self.vref is not None:  # the reference's samples of the period, averaged (static base)
+            if self.vref is not None:  # the reference's samples of the step, averaged (static base)
                 dv = dv - self.vref[j]
             yield j, self.t[(j + 1) * m - 1], dv
 
     def finish(self):
-        """Integrate the samples after the last whole period with the last command.
+        """Integrate the samples after the last whole step with the last command.
 
         Returns
         -------
         float or None
-            The time of the last sample, s, or None when the periods used every sample.
+            The time of the last sample, s, or None when the steps used every sample.
         """
         dth, dv = self._tail
         if dth.shape[1] == 0:

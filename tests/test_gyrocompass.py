@@ -114,7 +114,7 @@ def test_paper000_scenario_starts_from_the_papers_euler_platform_angles():
     guess = scn.initial_guess(C)
     assert np.degrees(attitude.euler_platform_angles(guess, C)) == pytest.approx([3.0, 3.0, 180.0], abs=1e-9)
     assert "adrc-paper-h1-4s" in scn.methods and scn.method("adrc-paper-h1-4s").h1 == 4.0
-    assert scn.method("adrc-paper-h1-4s").h == 0.02 and scn.method("adrc-paper").h1 == pytest.approx(0.2)
+    assert scn.method("adrc-paper-h1-4s").step_s == 0.02 and scn.method("adrc-paper").h1 == pytest.approx(0.2)
     assert scn.vref_spec.sigma == (0.05, 0.05, 0.05)
 
 
