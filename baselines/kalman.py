@@ -72,6 +72,90 @@ def discretize(F, Qc, T):
     return Phi, Qc * T + (FQ + np.swapaxes(FQ, -1, -2)) * T * T / 2
 
 
+class FeedbackKalman:
+    """R error-state Kalman filters, one per run, around one feedback-corrected strapdown (module docstring).
+
+    Each :meth:`step` integrates one update interval of bias-compensated increments through the strapdown, forms
+    the psi-angle model there (:func:`error_model`, :func:`discretize`), predicts and updates the filters with
+    the measurement ``z = v_INS - v_ref`` and feeds the estimate back into the strapdown and the biases.
+
+    Parameters
+    ----------
+    sd : fusionbench.strapdown.Strapdown
+        The strapdown of the R runs.
+    bank : baselines.filter_bank.FilterBank
+        The filters (``x``, ``P``, ``H``, ``R``).
+    qc : ndarray, shape (11,)
+        Continuous noise densities of the states (:meth:`KalmanAligner._qc`).
+    T, dt : float
+        Update interval and sample interval, s.
+    q_scale, update : callable
+        The aligner's hooks: ``q_scale(bank)`` the factor (R,) on Q in the prediction, ``update(bank, z, k)`` the
+        measurement update k (the adaptive variant adapts R and Q there).
+
+    Attributes
+    ----------
+    x, P : ndarray
+        The filters' state (R, 11) and covariance (R, 11, 11) (the bank's; ``x`` is zero after each feedback).
+    z : ndarray, shape (R, 2)
+        The last measurement, m/s.
+    eps_hat, nab_hat : ndarray, shape (R, 3)
+        Gyro (rad/s) and accelerometer (m/s^2) biases fed back so far, body frame.
+    """
+
+    def __init__(self, sd, bank, qc, T, dt, q_scale, update):
+        self.sd, self.bank, self.qc, self.T, self.dt = sd, bank, qc, T, dt
+        self._q_scale, self._update = q_scale, update
+        R = sd.runs
+        self.z = np.zeros((R, 2))
+        self.eps_hat = np.zeros((R, 3))
+        self.nab_hat = np.zeros((R, 3))
+
+    @property
+    def x(self):
+        return self.bank.x
+
+    @property
+    def P(self):
+        return self.bank.P
+
+    def step(self, dth, dv, v_ref, k):
+        """Step k over the increments ``dth``, ``dv`` (R, m, 3) of one update interval; ``v_ref`` (R, 2) m/s the
+        reference's horizontal velocity at its end (None: zero). Returns the misalignment sigma (R, 3) rad, ENU."""
+        sd, bank, qc, T, dt = self.sd, self.bank, self.qc, self.T, self.dt
+        R = dth.shape[0]
+        g_in = dth - self.eps_hat[:, None] * dt
+        a_in = dv - self.nab_hat[:, None] * dt
+        C_prev = sd.state.C_bn.copy()
+        sd.run(g_in, a_in, record_every=dth.shape[1])
+        st = sd.state
+        f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
+        w_ie = earth.earth_rate_n(st.lat)
+        w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
+        F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en)
+        Qc = np.zeros((R, NX, NX))
+        Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
+        Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
+        Qc[:, 5:, 5:] = np.diag(qc[5:])
+        Phi, Qd = discretize(F, Qc, T)
+        self.z = st.v_n[:, :2] - (0.0 if v_ref is None else v_ref)
+        bank.predict(Phi, Qd * np.reshape(self._q_scale(bank), (-1, 1, 1)))
+        self._update(bank, self.z, k)
+        x = bank.x.copy()
+        bank.reset_x()  # feedback below resets every state
+        sigma = np.sqrt(np.diagonal(bank.P, axis1=1, axis2=2)[:, :3])
+        st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
+        st.v_n[:, :2] -= x[:, 3:5]
+        self.eps_hat += x[:, 5:8]
+        self.nab_hat += x[:, 8:11]
+        return sigma
+
+    def coast(self, dth, dv):
+        """Integrate the increments ``dth``, ``dv`` (R, n, 3) through the bias-compensated strapdown, no update."""
+        self.sd.run(dth - self.eps_hat[:, None] * self.dt, dv - self.nab_hat[:, None] * self.dt,
+                    record_every=dth.shape[1])
+
+
 class KalmanAligner(AlignerBase):
     """Kalman fine alignment (method ``kf``) on filterpy, feedback-corrected strapdown.
 
@@ -192,48 +276,20 @@ class KalmanAligner(AlignerBase):
         T = m * dt  # the filter's update interval: step_s in whole samples
         steps = N // m
         tail = N - steps * m  # samples after the last filter step, integrated at the end (time rule)
-        qc = self._qc()
-        P0 = self._p0(site.lat)
-        bank = self._new_bank(R, P0)
-        eps_hat = np.zeros((R, 3))
-        nab_hat = np.zeros((R, 3))
+        kf = FeedbackKalman(sd, self._new_bank(R, self._p0(site.lat)), self._qc(), T, dt, self._q_scale, self._update)
         out_t = np.empty(steps + (tail > 0))
         out_C = np.empty((R, steps + (tail > 0), 3, 3))
         out_s = np.empty((R, steps + (tail > 0), 3))
         for j in range(steps):
             a, b = j * m, (j + 1) * m
-            g_in = dth[:, a:b] - eps_hat[:, None] * dt
-            a_in = dv[:, a:b] - nab_hat[:, None] * dt
-            C_prev = sd.state.C_bn.copy()
-            sd.run(g_in, a_in, record_every=m)
-            st = sd.state
-            f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
-            w_ie = earth.earth_rate_n(st.lat)
-            w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
-            F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en)
-            Qc = np.zeros((R, NX, NX))
-            Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
-            Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
-            Qc[:, 5:, 5:] = np.diag(qc[5:])
-            Phi, Qd = discretize(F, Qc, T)
-            z = st.v_n[:, :2] - (0.0 if vref is None else vref[:, b - 1, :2])
-            bank.predict(Phi, Qd * np.reshape(self._q_scale(bank), (-1, 1, 1)))
-            self._update(bank, z, j)
-            x = bank.x.copy()
-            bank.reset_x()  # feedback below resets every state
-            out_s[:, j] = np.sqrt(np.diagonal(bank.P, axis1=1, axis2=2)[:, :3])
-            st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
-            st.v_n[:, :2] -= x[:, 3:5]
-            eps_hat += x[:, 5:8]
-            nab_hat += x[:, 8:11]
+            out_s[:, j] = kf.step(dth[:, a:b], dv[:, a:b], None if vref is None else vref[:, b - 1, :2], j)
             out_t[j] = t[b - 1]
-            out_C[:, j] = st.C_bn
+            out_C[:, j] = sd.state.C_bn
         if tail:  # the last samples, through the bias-compensated strapdown without an update
-            a = N - tail
-            sd.run(dth[:, a:] - eps_hat[:, None] * dt, dv[:, a:] - nab_hat[:, None] * dt, record_every=tail)
+            kf.coast(dth[:, N - tail:], dv[:, N - tail:])
             out_t[-1], out_C[:, -1], out_s[:, -1] = t[-1], sd.state.C_bn, out_s[:, -2] if steps else np.nan
-        return AlignmentResult(self.name, out_t, out_C, {"gyro_bias": eps_hat, "accel_bias": nab_hat}, sigma_phi=out_s,
-                               imu_model=self.spec.name)
+        return AlignmentResult(self.name, out_t, out_C, {"gyro_bias": kf.eps_hat, "accel_bias": kf.nab_hat},
+                               sigma_phi=out_s, imu_model=self.spec.name)
 
 
 class AdaptiveKalmanAligner(KalmanAligner):
