@@ -367,25 +367,25 @@ class Posterior:
             Ri = R_inv if model is None else R_inv * model.sigmas()[None, :]
             if f in sel:  # a bias key: joint covariance of the biases
                 if parents:
-                    P = self._assemble(cov_b, parents)
-                    cross = -A @ P
-                    cov_b[f, f] = Ri @ Ri.T - cross @ A.T
-                    off = _offsets(parents)
-                    for j, p in enumerate(parents):
-                        cov_b[f, p] = cross[:, off[j]:off[j + 1]]
+                    self._condition(cov_b, f, parents, A, Ri, parents)
                 else:
                     cov_b[f, f] = Ri @ Ri.T
                 continue
-            P = self._assemble(cov, parents)
-            cross = -A @ P
-            cov[f, f] = Ri @ Ri.T - cross @ A.T
-            off = _offsets(parents)
-            for j, p in enumerate(parents):
-                if p not in sel:
-                    cov[f, p] = cross[:, off[j]:off[j + 1]]
+            self._condition(cov, f, parents, A, Ri, [p for p in parents if p not in sel])
             sens[f] = -A @ np.vstack([sens[p] for p in parents])
         self._cov, self._sens = cov, sens
         self.S_bb = self._assemble(cov_b, self.bias_keys) if nb else np.zeros((0, 0))
+
+    @classmethod
+    def _condition(cls, cov, f, parents, A, Ri, kept):
+        """The covariances of a frontal key ``f`` given its ``parents`` (whose joint covariance ``cov`` holds):
+        ``Sigma_ff = Ri Ri^T + A Sigma_PP A^T`` and ``Sigma_fp = -A Sigma_Pp`` for the parents ``kept``."""
+        cross = -A @ cls._assemble(cov, parents)
+        cov[f, f] = Ri @ Ri.T - cross @ A.T
+        off = _offsets(parents)
+        for j, p in enumerate(parents):
+            if p in kept:
+                cov[f, p] = cross[:, off[j]:off[j + 1]]
 
     @staticmethod
     def _assemble(cov, keys):
