@@ -113,10 +113,12 @@ class FeedbackKalman:
 
     @property
     def x(self):
+        """The filters' error state (R, 11) (zero after each feedback)."""
         return self.bank.x
 
     @property
     def P(self):
+        """The filters' covariance (R, 11, 11)."""
         return self.bank.P
 
     def step(self, dth, dv, v_ref, k):
@@ -141,9 +143,9 @@ class FeedbackKalman:
         self.z = st.v_n[:, :2] - (0.0 if v_ref is None else v_ref)
         bank.predict(Phi, Qd * np.reshape(self._q_scale(bank), (-1, 1, 1)))
         self._update(bank, self.z, k)
-        x = bank.x.copy()
+        x = self.x.copy()
         bank.reset_x()  # feedback below resets every state
-        sigma = np.sqrt(np.diagonal(bank.P, axis1=1, axis2=2)[:, :3])
+        sigma = np.sqrt(np.diagonal(self.P, axis1=1, axis2=2)[:, :3])
         st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
         st.v_n[:, :2] -= x[:, 3:5]
         self.eps_hat += x[:, 5:8]

@@ -177,10 +177,16 @@ class DampedNavigator(AlignerBase):
             coefficients of the networks on the east and north velocity (1: not engaged),
             ``figures`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
         """
-        return self.align(imu, site, vref=vref, init=init)
+        vref, init = self.check(imu, site, vref, init)
+        return self._navigate(imu, site, init, vref)
 
     def _align(self, imu: IMUData, site, vref, init) -> AlignmentResult:
-        """The runner's adapter: navigation (:meth:`navigate`) from ``init``, which the policy has required."""
+        """The adapter the runner calls (``align``): after the input policy, which requires ``init``, the
+        navigation of :meth:`navigate`."""
+        return self._navigate(imu, site, init, vref)
+
+    def _navigate(self, imu: IMUData, site, init, vref) -> AlignmentResult:
+        """:meth:`navigate` on checked arguments: the record in chunks of an hour (:meth:`navigate_chunks`)."""
         t, dth, dv = imu.increments()
         if self.scheme == "adaptive" and self.accel_source == "vref" and vref is None:
             raise ValueError(f"{self.name}: vref: accel_source 'vref' needs a reference velocity, found none")

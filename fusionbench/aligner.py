@@ -326,7 +326,7 @@ class Navigator(Protocol):
             R recordings on one time grid, body frame RFU (x right, y forward, z up): angle (rad) and velocity
             (m/s) increments, or angular rates (rad/s) and specific forces (m/s^2).
         site : Site
-            Latitude and longitude (rad) and height (m) at the initial state; the vehicle starts at rest there.
+            Latitude and longitude (rad) and height (m) at the initial state (``damped-nav`` starts at rest there).
         init : ndarray, shape (R, 3, 3) or (3, 3)
             Initial attitude ``C_bn`` (body RFU to navigation ENU) at the initial state ``imu.t0``.
         vref : ndarray, shape (R, M, 3), optional
