@@ -56,8 +56,8 @@ The level, the default way: estimated, not commanded
   rad/s would give 0.16 on a tactical IMU without reference noise and 0.85 with 0.05 m/s.
 * The NLSEF (h1 = 4 s, c1 = 0.8; the velocity loop at 0.27 and 4.7 1/s with this ESO) keeps the
   computed frame within about an arcminute of level, which is all the azimuth fit needs.
-* h = 0.1 s: ten 100-Hz samples per step, the reference averaged over them (nothing is lost at these
-  bandwidths), five times fewer Python steps than h = 0.02 s.
+* h = ``step_s`` = 0.1 s: ten 100-Hz samples per step, the reference averaged over them (nothing is lost at
+  these bandwidths), five times fewer Python steps than h = 0.02 s.
 
 Checked on 100-Hz simulations, 300 and 600 s (static, 1-2 deg and seed-000 sways; latitudes 0, 34,
 -45, 60, 75 deg; headings 0, 90, 179, -179 deg; seed000, navigation and tactical grade; 0, 0.01 and
@@ -94,10 +94,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, variant
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, variant
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
-from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
 from fusionbench.strapdown import rodrigues
 
 from .primitives import ExtendedStateObserver, nlsef
@@ -110,7 +110,7 @@ _H = 0.02  # the printed step, s
 #: record), since the paper's Figs. 3-4 show an azimuth that converges over 250 s, which a single
 #: correction at one instant cannot draw (its text describes the correction as one-shot).
 PAPER_PARAMETERS = {
-    "h": _H, "c0": 1.0, "r0": 1 / _H**2, "h0": _H,
+    "step_s": _H, "c0": 1.0, "r0": 1 / _H**2, "h0": _H,
     "beta01": 1 / _H, "beta02": 1 / (3 * _H**2), "beta03": 1 / (18**2 * _H**3), "delta": 20000.0,
     "r1": 1 / _H, "c1": 0.8, "h1": 10 * _H,
     "level": "loop", "refine": True,
@@ -121,7 +121,7 @@ def level_loop_model(method, dt, g=9.8):
     """Linear model of one level channel (north: b = +g) closed by ``method`` on an IMU sampled at ``dt`` (s).
 
     Inside the linear zones of fal and fhan (every velocity error of a levelled gyrocompass is) the loop
-    is linear: per control step h = m dt (m whole samples) with state x = [v, th, z1, z2, z3] (velocity
+    is linear: per control step h = m dt (the method's ``step_s`` in m whole samples) with state x = [v, th, z1, z2, z3] (velocity
     error m/s, tilt rad, ESO states), the command u = -(z1 + 2 c1 h1 z2) / h1^2 - z3 / g held over the
     step, the measurement y = v + n at its end (n: the reference's noise averaged over the step)::
 
@@ -138,7 +138,7 @@ def level_loop_model(method, dt, g=9.8):
     m : int
         IMU samples per step.
     """
-    m = max(1, int(round(method.h / dt)))
+    m = max(1, int(round(method.step_s / dt)))
     h = m * dt
     k = method.gains(h)
     b2, b3 = k["beta02"] / method.delta**0.5, k["beta03"] / method.delta**0.75  # fal's linear zone
@@ -193,7 +193,7 @@ def level_noise(method, dt, sigma_v=0.0, arw=0.0, vrw=0.0, g=9.8):
     return float(np.sqrt(c_loop @ P @ c_loop)), float(np.sqrt(c_obs @ P @ c_obs))
 
 
-class ADRCGyrocompass:
+class ADRCGyrocompass(AlignerBase):
     """ADRC gyrocompass (method ``adrc``): the levels read off the ESO, the azimuth off the commands.
 
     The defaults are this project's working configuration (see the module docstring);
@@ -201,10 +201,11 @@ class ADRCGyrocompass:
 
     Parameters
     ----------
-    h : float
-        ADRC step, s (0.1). Rounded to a whole number of IMU samples; a recording sampled more slowly
-        runs the ADRC at its own sample interval, and gains that are unstable at that step (in the
-        linear zone, :func:`level_loop_model`) are refused with a ValueError.
+    step_s : float
+        ADRC step, s (0.1): the step h of Han's discrete formulas (ESO, TD, NLSEF and the gains below that
+        default to expressions in h; :mod:`adrc.primitives` keeps the symbol h). Rounded to a whole number of
+        IMU samples; a recording sampled more slowly runs the ADRC at its own sample interval, and gains that
+        are unstable at that step (in the linear zone, :func:`level_loop_model`) are refused with a ValueError.
     c0, r0, h0 : float, optional
         TD damping, acceleration bound (default 1/h^2, 1/s^2 x m/s) and step (default h, s). The TD is
         not evaluated (its reference and initial state are zero, so its output is zero); they are
@@ -237,12 +238,13 @@ class ADRCGyrocompass:
     description = ("ADRC gyrocompass (seed 000): ESO/NLSEF level loops with the level read off the ESO, azimuth "
                    "from the steady commands (eq. 19, least squares)")
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=80.0)
+    max_latitude_deg = MAX_LATITUDE_DEG
 
-    def __init__(self, h=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
+    def __init__(self, step_s=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  eso_bandwidth=0.13, r1=None, c1=0.8, h1=4.0, level="observer", fit_from_s=10.0, shot_s=40.0,
                  refine=True, imu=None):
         self.spec = None if imu is None else load_spec(imu)
-        self.h = float(h)
+        self.step_s = float(step_s)
         self.c0, self.c1, self.delta = c0, c1, float(delta)
         given = (beta01, beta02, beta03)
         # explicit gains (the printed ones) leave no role to the bandwidth
@@ -251,16 +253,16 @@ class ADRCGyrocompass:
             raise ValueError(f"level: expected 'observer' or 'loop', found {level!r}")
         self.level = level
         self._given = {"r0": r0, "h0": h0, "beta01": beta01, "beta02": beta02, "beta03": beta03, "r1": r1, "h1": h1}
-        for name, value in self.gains(self.h).items():
+        for name, value in self.gains(self.step_s).items():
             setattr(self, name, value)
         self.fit_from_s, self.shot_s, self.refine = fit_from_s, shot_s, refine
         self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
 
     def gains(self, h):
-        """The step-dependent parameters for step ``h`` (s) where not given: the ESO's from
-        ``eso_bandwidth`` (independent of h), else the paper's formulas in h.
+        """The step-dependent parameters for step ``h`` (s, ``step_s`` rounded to whole samples) where not given:
+        the ESO's from ``eso_bandwidth`` (independent of h), else the paper's formulas in h.
 
-        A recording sampled more slowly than ``self.h`` runs the ADRC at its own sample interval."""
+        A recording sampled more slowly than ``step_s`` runs the ADRC at its own sample interval."""
         defaults = {"r0": 1.0 / h**2, "h0": h, "beta01": 1.0 / h, "beta02": 1.0 / (3 * h**2),
                     "beta03": 1.0 / (18**2 * h**3), "r1": 1.0 / h, "h1": 10 * h}
         w = self.eso_bandwidth
@@ -272,17 +274,16 @@ class ADRCGyrocompass:
         """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (eqs. 17-18)."""
         return [(float(self.shot_s), "azimuth shot")]
 
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
-        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
-        loop = start_loop(self, imu, site, vref, init, self.h)
-        h, R, g = loop.period, loop.R, site.g
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
+        ``init`` the loop starts levelled with yaw 0."""
+        loop = CommandLoop(imu, site, init, self.step_s, vref)
+        h, R, g = loop.step_s, loop.R, site.g  # h: Han's step, step_s in whole samples
         A, _, _, _ = level_loop_model(self, imu.dt, g)
         rho = float(np.max(np.abs(np.linalg.eigvals(A))))
         if rho >= 1.0:
-            raise ValueError(f"step: {self.name}'s level loop is unstable at the {h:g} s step of this recording "
-                             f"(spectral radius {rho:.3g} in the linear zone); its gains are for a {self.h:g} s step")
+            raise ValueError(f"{self.name}: step_s: the level loop is unstable at the {h:g} s step of this recording "
+                             f"(spectral radius {rho:.3g} in the linear zone); its gains are for a {self.step_s:g} s step")
         k = self.gains(h)
         b0 = np.array([-g, g])  # channels: [east (drives w_cN), north (drives w_cE)]
         eso = ExtendedStateObserver((R, 2), h, k["beta01"], k["beta02"], k["beta03"], self.delta, b0)

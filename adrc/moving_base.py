@@ -250,7 +250,7 @@ of an eastward speed; a tactical IMU's bias and scale errors 0.7 mg at most).
 
 The paper's configuration
 -------------------------
-:data:`PAPER_PARAMETERS` holds the printed values: T = 0.1 s, alpha = 1, delta = 2 h, beta11 = beta21
+:data:`PAPER_PARAMETERS` holds the printed values: T = h = 0.1 s (``step_s``), alpha = 1, delta = 2 h, beta11 = beta21
 = 0.6, beta12 = beta22 = 0.08 (read as continuous gains, above), TD h1 = 5 h, r = 500, the ESO started
 at rest (z1 = y, z2 = 0) with its fixed gains, and no attitude feedback: the paper reads eqs. 7, 9 and 12
 out as the estimates (section 3, "eqs. 3-15 make up the alignment loop"); nothing in them torques the
@@ -270,27 +270,27 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, check_azimuth_observable, coarse_then_fine,
-                                 check_not_accelerating, initial_attitude, variant)
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_not_accelerating, coarse_then_fine, variant
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.compass import check_compass_latitude
+from fusionbench.compass import MAX_LATITUDE_DEG
 from fusionbench.strapdown import NavState, Strapdown
 
 from .primitives import FSTTrackingDifferentiator, SecondOrderESO, fst  # noqa: F401 (re-exported)
 
-__all__ = ["fst", "FSTTrackingDifferentiator", "SecondOrderESO", "LeastSquaresDifferentiator", "ESOTDAligner",
-           "PAPER_PARAMETERS", "expanding_memory_gains"]
+__all__ = ["fst", "FSTTrackingDifferentiator", "SecondOrderESO", "LeastSquaresDifferentiator", "ESOTDEstimator",
+           "ESOTDAligner", "PAPER_PARAMETERS", "expanding_memory_gains"]
 
-#: Seed 001's printed configuration (section 4): T = 0.1 s; ESO alpha1 = alpha2 = 1, delta1 = delta2 = 2 h,
-#: beta11 = beta21 = 0.6, beta12 = beta22 = 0.08 (continuous gains, see the module docstring); TD h1 = 5 h,
-#: r = 500; the ESO started at rest (z1 = y, z2 = 0) with fixed gains, eq. 12's derivative from the fst TD,
-#: and the estimates only read out, never fed back into the platform (eqs. 3-15 have no control term).
+#: Seed 001's printed configuration (section 4): T = 0.1 s (the step, ``step_s``); ESO alpha1 = alpha2 = 1,
+#: delta1 = delta2 = 2 h, beta11 = beta21 = 0.6, beta12 = beta22 = 0.08 (continuous gains, see the module
+#: docstring); TD h1 = 5 h, r = 500; the ESO started at rest (z1 = y, z2 = 0) with fixed gains, eq. 12's
+#: derivative from the fst TD, and the estimates only read out, never fed back into the platform (eqs. 3-15
+#: have no control term).
 #: ``ESOTDAligner(**PAPER_PARAMETERS)`` is the paper's aligner.
 PAPER_PARAMETERS = {
-    "T": 0.1,
+    "step_s": 0.1,
     "alpha1": 1.0, "alpha2": 1.0,
     "delta1": 0.2, "delta2": 0.2,        # 2 h
     "beta11": 0.6, "beta12": 0.08, "beta21": 0.6, "beta22": 0.08,
@@ -362,25 +362,257 @@ class LeastSquaresDifferentiator:
         self.S[4] = self.S[4] + alpha * S1 + d_slope * S2
 
 
-class _WithReference:
-    """A coarse aligner run on the first part of a record with the matching part of the reference."""
+class ESOTDEstimator:
+    """The estimator of :class:`ESOTDAligner` over R runs, stepped once per ESO/TD step (the module docstring's
+    names and equations).
 
-    def __init__(self, coarse, vref):
-        self.coarse, self.vref = coarse, vref
+    :meth:`step` takes one step's strapdown output and returns the estimate ``psi`` of the strapdown's
+    misalignment (eqs. 6, 7, 9, 12); :meth:`reset_velocity` records the velocity reset to the reference;
+    :meth:`feedback` turns the strapdown by the estimate and moves every observer to where it would be had the
+    strapdown always carried the corrected error ("Velocity reset and attitude feedback").
 
-    def align(self, imu, site, vref=None, init=None):
-        return self.coarse.align(imu, site, vref=None if self.vref is None else self.vref[:, :imu.samples])
+    Parameters
+    ----------
+    aligner : ESOTDAligner
+        The options (gains, the TD, the feedback schedule).
+    runs : int
+        R.
+    h : float
+        Step, s (the aligner's ``step_s`` in whole samples: Han's h of :mod:`adrc.primitives`).
+    dt : float
+        Sample interval, s.
+    m : int
+        Samples per step.
+
+    Attributes
+    ----------
+    eso : SecondOrderESO
+        The level channels' ESO (eq. 6), batch (R, 2): z1 the unreset velocity errors [dvE, dvN] (m/s), z2 their
+        rates (m/s^2); gains beta1, beta2 (expanding memory down to the floor with ``eso_start="ls"``).
+    td_f : FSTTrackingDifferentiator
+        fst TD on the specific force f_n (R, 3): x2 its rate (s' of eq. 12 with td="fst", f' in the feedback).
+    td_q : FSTTrackingDifferentiator
+        td="fst": fst TD on q, the measured part of eq. 9 (x2 its rate, eq. 15).
+    td_ls, td_p : LeastSquaresDifferentiator
+        td="ls": eq. 12 integrated (Y = q - int m against X; slope -psiU) and p against time (psiN's drift).
+    eso_f, eso_q, eso_x : SecondOrderESO
+        td="ls": copies of the ESO's filter on the specific force, on a unit quadratic (its exact ramp lag) and
+        on the regressor X.
+    y : ndarray, shape (R, 2)
+        The unreset level velocity error fed to the ESO at the last step, m/s.
+    reset_sum : ndarray, shape (R, 2)
+        Velocity resets so far, m/s.
+    psi_fb : ndarray, shape (R, 3)
+        Attitude corrections fed back so far, rad.
+    """
+
+    def __init__(self, aligner, runs, h, dt, m):
+        self.a, self.R, self.h, self.dt = aligner, runs, h, dt
+        R = runs
+        self.h1 = aligner.td_h1_for(h)
+        self.b1_floor, self.b2_floor = b1_floor, b2_floor = np.array(aligner.beta1), np.array(aligner.beta2)
+        self.eso = SecondOrderESO((R, 2), h, b1_floor, b2_floor, aligner.alpha, aligner.deltas_for(h))
+        if aligner.td == "fst":
+            self.td_q = FSTTrackingDifferentiator((R,), h, aligner.td_r, self.h1)
+        else:
+            forget = 1.0 if aligner.td_memory_s is None else float(np.exp(-h / aligner.td_memory_s))
+            self.td_ls = LeastSquaresDifferentiator((R,), forget)
+            self.td_p = LeastSquaresDifferentiator((R,), forget)   # p against time: psiN's drift (-epsN), for its lag
+            self.X_int, self.Xb_int, self.M_int = np.zeros(R), np.zeros(R), np.zeros(R)  # int of den0's parts and of m
+            self.den0_prev = self.m_prev = None
+            self.td_from = max(0, int(np.ceil(aligner.td_start_s / h - 1e-9)))
+            self.td_ready = self.td_from + int(np.ceil(aligner.td_min_s / h - 1e-9))
+        self.td_f = FSTTrackingDifferentiator((R, 3), h, aligner.td_r, aligner.force_h1)  # f_n' (s', feedback shifts)
+        if aligner.td == "ls":  # f_n through the ESO's own filter, for s, n, fU consistent with z2 (module docstring)
+            self.eso_f = SecondOrderESO((R, 3), h, b1_floor[[0, 1, 1]], b2_floor[[0, 1, 1]], 1.0, 1.0)
+            self.F_int = np.zeros((R, 3))   # int f_n dt up to the start of the step, m/s
+            self.eso_f_b1, self.eso_f_b2 = self.eso_f.beta1.copy(), self.eso_f.beta2.copy()
+            # the ESO's own response to a unit quadratic Q = tau^2 / 2 (tau from the first step's mean sample
+            # time), with the same gains: its errors are the exact lag of a ramp in y' (feedback shifts)
+            self.eso_q = SecondOrderESO((2,), h, b1_floor, b2_floor, 1.0, 1.0)
+            self.eso_x = SecondOrderESO((R,), h, b1_floor[1], b2_floor[1], 1.0, 1.0)  # G X, the regressor as q sees it
+            self.XX_int = np.zeros(R)       # int X dt, eso_x's input
+            self.s_jumps = np.zeros(R)      # jumps of fE / fU at feedbacks (X stays continuous)
+            # the mean square of the sample times about a step's mean
+            self.tau2_mean = np.mean(((np.arange(m) - (m - 1) / 2.0) * dt) ** 2)
+        # first feedback at the first step ending at or after feedback_from_s (step j ends at t0 + (j + 1) h)
+        self.fb_from = (None if aligner.feedback_from_s is None
+                        else max(0, int(np.ceil(aligner.feedback_from_s / h - 1 - 1e-9))))
+        self.fb_every = max(1, int(round(aligner.feedback_every_s / h)))
+        self.reset_sum = np.zeros((R, 2))
+        self.psi_fb = np.zeros((R, 3))
+
+    def q_mean(self, c):
+        """The step mean of the unit quadratic Q = tau^2 / 2 about the step's centre ``c`` (s)."""
+        return (c * c + self.tau2_mean) / 2.0
+
+    def step(self, j, C_bn, v_n, dv, vref, st):
+        """Step ``j`` from the strapdown's attitude ``C_bn`` (R, m, 3, 3) and velocity ``v_n`` (R, m, 3) after
+        each of the step's samples, the samples' velocity increments ``dv`` (R, m, 3), the reference ``vref``
+        (R, m, 3) at those samples and the strapdown's state ``st`` at the step's end; returns psi (R, 3), rad."""
+        a, h, dt, R = self.a, self.h, self.dt, self.R
+        eso = self.eso
+        dv_samples = v_n[..., :2] - vref[..., :2]
+        y = self.y = dv_samples.mean(axis=1) + self.reset_sum          # unreset level velocity error, m/s
+        f_n = np.einsum("rkij,rkj->ri", C_bn, dv) / h  # specific force, ENU, m/s^2
+        lat = st.lat
+        rm, rn = earth.radii(lat)
+        sl, cl = np.sin(lat), np.cos(lat)
+        lon_rate = st.v_n[:, 0] / ((rn + st.h) * cl)
+        lat_rate = st.v_n[:, 1] / (rm + st.h)
+        W = earth.OMEGA_IE + lon_rate
+        cor = (2.0 * earth.OMEGA_IE + lon_rate) * sl     # Coriolis coefficient of eqs. 4, 7, 9
+        fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
+
+        if j == 0:
+            eso.reset(y)
+        if a.eso_start == "ls":  # the least-squares line through the samples so far, down to the floor
+            b1, b2 = expanding_memory_gains(j, h)
+            eso.beta1, eso.beta2 = np.maximum(b1, self.b1_floor), np.maximum(b2, self.b2_floor)
+        z1, z2 = eso.update(y)                            # eq. 6, both channels
+        if a.td == "ls":
+            eso_f, eso_q = self.eso_f, self.eso_q
+            # the step mean of int f_n dt over the step's samples, as y is the step mean of the velocity
+            df_k = np.einsum("rkij,rkj->rki", C_bn, dv)
+            F_bar = self.F_int + (np.cumsum(df_k, axis=1)).mean(axis=1)
+            self.F_int = self.F_int + df_k.sum(axis=1)
+            if j == 0:
+                eso_f.reset(F_bar, f_n)
+            if a.eso_start == "ls":
+                eso_f.beta1, eso_f.beta2 = np.maximum(b1, self.eso_f_b1), np.maximum(b2, self.eso_f_b2)
+            f_n = eso_f.update(F_bar)[1]                  # G f_n: the specific force as z2 sees it
+            if j == 0:
+                eso_q.reset(self.q_mean(0.0))
+            if a.eso_start == "ls":
+                eso_q.beta1, eso_q.beta2 = eso.beta1, eso.beta2
+            eso_q.update(self.q_mean(j * h))
+            if a.eso_start == "ls":
+                self.eso_x.beta1, self.eso_x.beta2 = eso.beta1[1], eso.beta2[1]
+            fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
+        dv_hat = z1 - self.reset_sum                           # current strapdown velocity error
+        p = -(z2[:, 0] - cor * dv_hat[:, 1]) / fU         # eq. 7 without the fN psiU term
+        q = (z2[:, 1] + cor * dv_hat[:, 0]) / fU          # eq. 9 without the fE psiU term
+        s, n = fE / fU, fN / fU
+        if j == 0:
+            self.td_f.reset(f_n)
+        _, df = self.td_f.update(f_n)
+        if a.td == "fst":
+            if j == 0:
+                self.td_q.reset(q)
+            _, dq = self.td_q.update(q)                        # eq. 15
+            ds = df[:, 0] / fU - fE * df[:, 2] / fU**2    # s' = (fE / fU)'
+            # eqs. 7, 9, 12 solved together (module docstring)
+            den = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate + ds
+            psiU = (W * sl * p - dq - s * (W * cl * q + lat_rate * p)) / den
+        else:
+            # eq. 12 integrated: Y = q - int m = a - psiU X with X = int den (module docstring); X from
+            # the raw specific force, then through the ESO's filter like q (the lag q carries)
+            den0 = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate
+            m_known = W * sl * p - s * (W * cl * q + lat_rate * p)
+            # den0 = W cosL + (the terms in s, n): those come through the ESO's filter already (s, n are
+            # G f ratios), W cosL does not and goes through a copy of the ESO (eso_x)
+            den_a, den_b = W * cl, den0 - W * cl
+            if self.den0_prev is not None:
+                self.X_int += 0.5 * h * (den_a + self.den0_prev[0])
+                self.Xb_int += 0.5 * h * (den_b + self.den0_prev[1])
+                self.M_int += 0.5 * h * (m_known + self.m_prev)
+            self.den0_prev, self.m_prev = (den_a, den_b), m_known
+            self.XX_int += self.X_int * h
+            if j == 0:
+                self.eso_x.reset(self.XX_int, self.X_int)
+            # int s' dt = s - s(0), with s = G fE / G fU already through the ESO's filter
+            X = self.X = self.eso_x.update(self.XX_int)[1] + self.Xb_int + s - self.s_jumps
+            if j >= self.td_from:
+                self.td_ls.add(X, q - self.M_int)
+                self.td_p.add(np.broadcast_to(self.eso_q.z2[0], (R,)), p)
+            psiU = -self.td_ls.fit(X)[1] if j >= self.td_ready else np.zeros(R)
+        psiE = q + s * psiU
+        if a.td == "ls" and j >= self.td_ready:
+            # q + s psiU is psiE through the ESO's filter, which lags a ramp by beta1 / beta2 (less the
+            # step's own delay): add the ramp the fit gives, psiE' = m - psiU den0 (module docstring)
+            lag = eso.beta1[1] / eso.beta2[1] - h - dt / 2.0
+            psiE = psiE + lag * (m_known - psiU * den0)
+            lagN = eso.beta1[0] / eso.beta2[0] - h - dt / 2.0
+            psiN = p + n * psiU + lagN * self.td_p.fit(self.eso_q.z2[0])[1]  # p's drift (mostly -epsN), the same lag
+        else:
+            psiN = p + n * psiU
+        # what the feedback needs of this step
+        self._now = f_n, df, W, sl, cl, lat_rate, cor, s
+        return np.stack([psiE, psiN, psiU], axis=-1)
+
+    def reset_velocity(self, dv_end):
+        """Record a reset of the strapdown's level velocity by ``-dv_end`` (R, 2) m/s (to the reference)."""
+        self.reset_sum += dv_end
+
+    def feedback_due(self, j):
+        """Whether the attitude is fed back after step ``j`` (``feedback_from_s``, ``feedback_every_s``)."""
+        return self.fb_from is not None and j >= self.fb_from and (j - self.fb_from) % self.fb_every == 0
+
+    def feedback(self, j, psi, st):
+        """After step ``j``: turn the strapdown's attitude ``st.C_bn`` by the estimate ``psi`` (R, 3) where it is in
+        the small-angle range, shift the observers accordingly; returns the estimate left (R, 3), rad."""
+        a, h, dt, R = self.a, self.h, self.dt, self.R
+        eso = self.eso
+        f_n, df, W, sl, cl, lat_rate, cor, s = self._now  # of the step just made
+        fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
+        # runs whose estimate is out of the small-angle range (not settled) are not corrected
+        ok = np.linalg.norm(psi, axis=-1) <= a.feedback_limit
+        d = np.where(ok[:, None], psi, 0.0)
+        st.C_bn[:] = apply_misalignment(st.C_bn, -d)
+        # exact change of the velocity-error rate: (exp([d x]) - I) f_n (= d x f_n to first order)
+        da = np.einsum("rij,rj->ri", rotvec_to_dcm(d), f_n) - f_n
+        # change of the psi rates (eq. 1 rows 3-5 for psi -> psi - d) and of the velocity-error
+        # accelerations: the ESO's steady ramp lag changes with them
+        dE = -(W * sl * d[:, 1] - W * cl * d[:, 2])
+        dN = W * sl * d[:, 0] + lat_rate * d[:, 2]
+        dU = -(W * cl * d[:, 0] + lat_rate * d[:, 1])
+        # d/dt (f x (-d) ) = f x dpsi' + f' x (-d), horizontal components
+        da_rate = np.stack([fN * dU - fU * dN - (df[:, 1] * d[:, 2] - df[:, 2] * d[:, 1]),
+                            fU * dE - fE * dU - (df[:, 2] * d[:, 0] - df[:, 0] * d[:, 2])], axis=-1)
+        lead = (h + dt) / 2.0
+        if a.td == "fst":
+            _, dz2 = eso.shift(da[:, :2], da_rate, lead=lead)
+        else:
+            # da already holds the specific force as z2 sees it (G f): only the ramp of the psi rates'
+            # change, f x dpsi', is new, with the ESO's exact lag from its response to Q
+            da_rate = np.stack([fN * dU - fU * dN, fU * dE - fE * dU], axis=-1)
+            c_next = (j + 1) * h
+            e1, e2 = self.eso_q.z1 - self.q_mean(c_next), self.eso_q.z2 - c_next
+            dz1 = da[:, :2] * lead + da_rate * (lead**2 / 2.0 + e1)
+            dz2 = da[:, :2] + da_rate * (lead + e2)
+            eso.z1, eso.z2 = eso.z1 + dz1, eso.z2 + dz2
+        # the TD's input q moves with the ESO's states: z22 (lag included) and, in the Coriolis
+        # term, dv_hat = z21 - resets, which from the next step on is da (h + lead) larger
+        dq_step = (dz2[:, 1] + cor * da[:, 0] * (h + lead)) / fU
+        dp_step = -(dz2[:, 0] - cor * da[:, 1] * (h + lead)) / fU
+        dq_rate = da_rate[:, 1] / fU - dq_step * df[:, 2] / fU
+        if a.td == "fst":
+            self.td_q.x1 += dq_step + (h - 2.0 * self.h1) * dq_rate  # prediction for the next step, less the lag
+            self.td_q.x2 += dq_rate
+        elif self.td_ls.origin is not None:
+            # the fit's past moves by the line the correction would have made: its value now by the
+            # jump of q (referred back from the next step's prediction), its slope -psiU by d_U
+            self.td_ls.shift(dq_step - dq_rate * lead, d[:, 2], self.X)
+            # p's past: its value by the jump of p, its slope by the change of psiN' (eq. 1 row 4)
+            self.td_p.shift(dp_step - dN * lead, dN, np.broadcast_to(self.eso_q.z2[0], (R,)))
+        self.td_f.x1 += da  # the strapdown's f_n turns with its attitude: f_n <- exp([d x]) f_n
+        if a.td == "ls":
+            self.eso_f.shift(da, lead=lead)
+            self.s_jumps += self.eso_f.z2[:, 0] / self.eso_f.z2[:, 2] - s
+        self.psi_fb += d
+        return psi - d
 
 
 # ---------------------------------------------------------------------------------------- aligner
-class ESOTDAligner:
+class ESOTDAligner(AlignerBase):
     """ESO/TD moving-base alignment (method ``eso-td``), seed 001; :data:`PAPER_PARAMETERS` are the paper's.
 
     Parameters
     ----------
-    T : float
-        ESO/TD step, s (0.1, the paper's sample period). Rounded to a whole number of IMU samples;
-        a faster IMU's velocities are averaged over each step, a slower one runs at its own interval.
+    step_s : float
+        ESO/TD step, s (0.1, the paper's sample period T; the step h of the discrete ESO and TD). Rounded to a
+        whole number of IMU samples; a faster IMU's velocities are averaged over each step, a slower one runs at
+        its own interval.
     alpha1, alpha2 : float
         fal exponents of the east and north ESO (1: linear).
     delta1, delta2 : float, optional
@@ -438,17 +670,18 @@ class ESOTDAligner:
     name = "eso-td"
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.7 arcmin from the limit (conformance)
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05)
+    max_latitude_deg = MAX_LATITUDE_DEG  # eq. 12 divides by the horizontal earth rate
     description = ("ESO/TD alignment (seed 001): 2nd-order ESO per level velocity channel, the azimuth from "
                    "eq. 12's derivative (least-squares TD); moving base with a velocity reference, static or swaying without")
 
-    def __init__(self, T=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
+    def __init__(self, step_s=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
                  beta21=0.1, beta22=0.0025, eso_start="ls", td="ls", td_h1=None, td_r=500.0, td_start_s="auto",
                  td_min_s=10.0, td_memory_s=None, force_h1=5.0, feedback_from_s="auto", feedback_every_s=10.0,
                  feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3, imu=None):
         self.spec = None if imu is None else load_spec(imu)
-        self.T = float(T)
-        if not self.T > 0:
-            raise ValueError(f"T: expected a positive step in s, found {T}")
+        self.step_s = float(step_s)
+        if not self.step_s > 0:
+            raise ValueError(f"step_s: expected a positive step in s, found {step_s}")
         self.coarse_s = float(coarse_s)
         self.alpha = (float(alpha1), float(alpha2))
         self._delta = (delta1, delta2)
@@ -480,7 +713,7 @@ class ESOTDAligner:
         self.feedback_limit = float(feedback_limit_deg) * np.pi / 180.0
         self.max_gravity_excess = float(max_gravity_excess)
         # the ESO's floor time: when the expanding-memory gains have fallen to beta (both of them)
-        self.eso_floor_s = self._eso_floor_time(self.T) if eso_start == "ls" else 0.0
+        self.eso_floor_s = self._eso_floor_time(self.step_s) if eso_start == "ls" else 0.0
         if isinstance(td_start_s, str):
             if td_start_s != "auto":
                 raise ValueError(f"td_start_s: expected a time in s or 'auto', found {td_start_s!r}")
@@ -491,13 +724,13 @@ class ESOTDAligner:
             # derivative (12 time constants of the slow pole; the specific-force TD settles meanwhile,
             # 8 force_h1), then the TD's transient (8 h1)
             slow = min(_slow_rate(b1, b2) for b1, b2 in zip(self.beta1, self.beta2))
-            self.settle_s = float(np.ceil(max(12.0 / slow, 8.0 * self.force_h1) + 8.0 * self.td_h1_for(self.T)))
+            self.settle_s = float(np.ceil(max(12.0 / slow, 8.0 * self.force_h1) + 8.0 * self.td_h1_for(self.step_s)))
         else:
             self.settle_s = float(np.ceil(self.td_start_s + self.td_min_s))
         if isinstance(feedback_from_s, str):
             if feedback_from_s != "auto":
                 raise ValueError(f"feedback_from_s: expected a time in s, 'auto' or None, found {feedback_from_s!r}")
-            feedback_from_s = self.settle_s if td == "fst" else max(self.eso_floor_s, self.T)
+            feedback_from_s = self.settle_s if td == "fst" else max(self.eso_floor_s, self.step_s)
         self.feedback_from_s = None if feedback_from_s is None else float(feedback_from_s)
         self.min_duration_s = self.settle_s
 
@@ -522,7 +755,7 @@ class ESOTDAligner:
         alignment at ``coarse_s`` (s), when no initial attitude is given."""
         return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
 
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
         """Align R recordings on a moving base with a velocity reference, or on a static or swaying base
         without one; see the module docstring.
 
@@ -540,26 +773,21 @@ class ESOTDAligner:
             20', 20', 40'). None: an inertial-frame coarse alignment over the first ``coarse_s`` seconds
             first (with the reference when there is one; without, it refuses a moving base).
         """
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
         t, dth, dvel = imu.increments()
         R = imu.runs
-        if init is None:  # any heading: inertial-frame coarse alignment first
+        if init is None:  # any heading: inertial-frame coarse alignment first (with the reference, if any)
             coarse = InertialCoarseAligner(history_points=20, max_gravity_excess=self.max_gravity_excess,
                                            caller=self.name)
-            return coarse_then_fine(imu, site, vref, _WithReference(coarse, vref), self.coarse_s,
-                                    lambda rest, vr, C0: self.align(rest, site, vr, C0))
-        check_compass_latitude(site.lat, self.name)
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, "
-                             f"found {imu.duration:g} s")
+            # the fine stage through align: the input policy again, on the rest of the record
+            return coarse_then_fine(imu, site, vref, coarse, self.coarse_s,
+                                    lambda rest, vr, C0, v0: self.align(rest, site, vr, C0))
         if vref is None:
             self._check_not_accelerating(dvel, imu.dt, site)
         dt = imu.dt
-        C0 = initial_attitude(init, R)
+        C0 = init
         if vref is None:
             vref = np.zeros((R, t.size, 3))
-        m = max(1, int(round(self.T / dt)))
+        m = max(1, int(round(self.step_s / dt)))
         h = m * dt
         steps = t.size // m
 
@@ -573,38 +801,7 @@ class ESOTDAligner:
         sd = Strapdown(NavState.broadcast(R, C0, v_n=v0, lat=site.lat, lon=site.lon, h=site.h), dt,
                        position_fixed=False, height_fixed=True)
 
-        h1 = self.td_h1_for(h)
-        b1_floor, b2_floor = np.array(self.beta1), np.array(self.beta2)
-        eso = SecondOrderESO((R, 2), h, b1_floor, b2_floor, self.alpha, self.deltas_for(h))
-        if self.td == "fst":
-            td_q = FSTTrackingDifferentiator((R,), h, self.td_r, h1)
-        else:
-            forget = 1.0 if self.td_memory_s is None else float(np.exp(-h / self.td_memory_s))
-            td_ls = LeastSquaresDifferentiator((R,), forget)
-            td_p = LeastSquaresDifferentiator((R,), forget)   # p against time: psiN's drift (-epsN), for its lag
-            X_int, Xb_int, M_int = np.zeros(R), np.zeros(R), np.zeros(R)  # int of den0's parts and of m
-            den0_prev = m_prev = None
-            td_from = max(0, int(np.ceil(self.td_start_s / h - 1e-9)))
-            td_ready = td_from + int(np.ceil(self.td_min_s / h - 1e-9))
-        td_f = FSTTrackingDifferentiator((R, 3), h, self.td_r, self.force_h1)  # f_n' (s', feedback shifts)
-        if self.td == "ls":  # f_n through the ESO's own filter, for s, n, fU consistent with z2 (module docstring)
-            eso_f = SecondOrderESO((R, 3), h, b1_floor[[0, 1, 1]], b2_floor[[0, 1, 1]], 1.0, 1.0)
-            F_int = np.zeros((R, 3))   # int f_n dt up to the start of the step, m/s
-            eso_f_b1, eso_f_b2 = eso_f.beta1.copy(), eso_f.beta2.copy()
-            # the ESO's own response to a unit quadratic Q = tau^2 / 2 (tau from the first step's mean sample
-            # time), with the same gains: its errors are the exact lag of a ramp in y' (feedback shifts)
-            eso_q = SecondOrderESO((2,), h, b1_floor, b2_floor, 1.0, 1.0)
-            eso_x = SecondOrderESO((R,), h, b1_floor[1], b2_floor[1], 1.0, 1.0)  # G X, the regressor as q sees it
-            XX_int = np.zeros(R)       # int X dt, eso_x's input
-            s_jumps = np.zeros(R)      # jumps of fE / fU at feedbacks (X stays continuous)
-            tau_s = (np.arange(m) - (m - 1) / 2.0) * dt           # sample times in a step about its mean
-            q_mean = lambda c: (c * c + np.mean(tau_s**2)) / 2.0  # noqa: E731 (the step mean of Q about centre c)
-        # first feedback at the first step ending at or after feedback_from_s (step j ends at t0 + (j + 1) h)
-        fb_from = None if self.feedback_from_s is None else max(0, int(np.ceil(self.feedback_from_s / h - 1 - 1e-9)))
-        fb_every = max(1, int(round(self.feedback_every_s / h)))
-
-        reset_sum = np.zeros((R, 2))
-        psi_fb = np.zeros((R, 3))
+        est = ESOTDEstimator(self, R, h, dt, m)
         records = steps + (t.size > steps * m)  # one more for the samples after the last step (time rule)
         hist_t = np.empty(records)
         hist_C = np.empty((R, records, 3, 3))
@@ -613,150 +810,19 @@ class ESOTDAligner:
         hist_y = np.empty((R, records, 2))
         for j in range(steps):
             out = sd.run(dth_b[j], dv_b[j], record_every=1)
-            dv_samples = out["v_n"][..., :2] - vref_b[j][..., :2]
-            y = dv_samples.mean(axis=1) + reset_sum          # unreset level velocity error, m/s
-            f_n = np.einsum("rkij,rkj->ri", out["C_bn"], dv_b[j]) / h  # specific force, ENU, m/s^2
             st = sd.state
-            lat = st.lat
-            rm, rn = earth.radii(lat)
-            sl, cl = np.sin(lat), np.cos(lat)
-            lon_rate = st.v_n[:, 0] / ((rn + st.h) * cl)
-            lat_rate = st.v_n[:, 1] / (rm + st.h)
-            W = earth.OMEGA_IE + lon_rate
-            cor = (2.0 * earth.OMEGA_IE + lon_rate) * sl     # Coriolis coefficient of eqs. 4, 7, 9
-            fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
-
-            if j == 0:
-                eso.reset(y)
-            if self.eso_start == "ls":  # the least-squares line through the samples so far, down to the floor
-                b1, b2 = expanding_memory_gains(j, h)
-                eso.beta1, eso.beta2 = np.maximum(b1, b1_floor), np.maximum(b2, b2_floor)
-            z1, z2 = eso.update(y)                            # eq. 6, both channels
-            if self.td == "ls":
-                # the step mean of int f_n dt over the step's samples, as y is the step mean of the velocity
-                df_k = np.einsum("rkij,rkj->rki", out["C_bn"], dv_b[j])
-                F_bar = F_int + (np.cumsum(df_k, axis=1)).mean(axis=1)
-                F_int = F_int + df_k.sum(axis=1)
-                if j == 0:
-                    eso_f.reset(F_bar, f_n)
-                if self.eso_start == "ls":
-                    eso_f.beta1, eso_f.beta2 = np.maximum(b1, eso_f_b1), np.maximum(b2, eso_f_b2)
-                f_n = eso_f.update(F_bar)[1]                  # G f_n: the specific force as z2 sees it
-                if j == 0:
-                    eso_q.reset(q_mean(0.0))
-                if self.eso_start == "ls":
-                    eso_q.beta1, eso_q.beta2 = eso.beta1, eso.beta2
-                eso_q.update(q_mean(j * h))
-                if self.eso_start == "ls":
-                    eso_x.beta1, eso_x.beta2 = eso.beta1[1], eso.beta2[1]
-                fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
-            dv_hat = z1 - reset_sum                           # current strapdown velocity error
-            p = -(z2[:, 0] - cor * dv_hat[:, 1]) / fU         # eq. 7 without the fN psiU term
-            q = (z2[:, 1] + cor * dv_hat[:, 0]) / fU          # eq. 9 without the fE psiU term
-            s, n = fE / fU, fN / fU
-            if j == 0:
-                td_f.reset(f_n)
-            _, df = td_f.update(f_n)
-            if self.td == "fst":
-                if j == 0:
-                    td_q.reset(q)
-                _, dq = td_q.update(q)                        # eq. 15
-                ds = df[:, 0] / fU - fE * df[:, 2] / fU**2    # s' = (fE / fU)'
-                # eqs. 7, 9, 12 solved together (module docstring)
-                den = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate + ds
-                psiU = (W * sl * p - dq - s * (W * cl * q + lat_rate * p)) / den
-            else:
-                # eq. 12 integrated: Y = q - int m = a - psiU X with X = int den (module docstring); X from
-                # the raw specific force, then through the ESO's filter like q (the lag q carries)
-                den0 = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate
-                m_known = W * sl * p - s * (W * cl * q + lat_rate * p)
-                # den0 = W cosL + (the terms in s, n): those come through the ESO's filter already (s, n are
-                # G f ratios), W cosL does not and goes through a copy of the ESO (eso_x)
-                den_a, den_b = W * cl, den0 - W * cl
-                if den0_prev is not None:
-                    X_int += 0.5 * h * (den_a + den0_prev[0])
-                    Xb_int += 0.5 * h * (den_b + den0_prev[1])
-                    M_int += 0.5 * h * (m_known + m_prev)
-                den0_prev, m_prev = (den_a, den_b), m_known
-                XX_int += X_int * h
-                if j == 0:
-                    eso_x.reset(XX_int, X_int)
-                # int s' dt = s - s(0), with s = G fE / G fU already through the ESO's filter
-                X = eso_x.update(XX_int)[1] + Xb_int + s - s_jumps
-                if j >= td_from:
-                    td_ls.add(X, q - M_int)
-                    td_p.add(np.broadcast_to(eso_q.z2[0], (R,)), p)
-                psiU = -td_ls.fit(X)[1] if j >= td_ready else np.zeros(R)
-            psiE = q + s * psiU
-            if self.td == "ls" and j >= td_ready:
-                # q + s psiU is psiE through the ESO's filter, which lags a ramp by beta1 / beta2 (less the
-                # step's own delay): add the ramp the fit gives, psiE' = m - psiU den0 (module docstring)
-                lag = eso.beta1[1] / eso.beta2[1] - h - dt / 2.0
-                psiE = psiE + lag * (m_known - psiU * den0)
-                lagN = eso.beta1[0] / eso.beta2[0] - h - dt / 2.0
-                psiN = p + n * psiU + lagN * td_p.fit(eso_q.z2[0])[1]  # p's drift (mostly -epsN), the same lag
-            else:
-                psiN = p + n * psiU
-            psi = np.stack([psiE, psiN, psiU], axis=-1)
-
+            psi = est.step(j, out["C_bn"], out["v_n"], dv_b[j], vref_b[j], st)
             hist_t[j] = t[(j + 1) * m - 1]
             hist_C[:, j] = apply_misalignment(st.C_bn, -psi)
-            hist_y[:, j] = y
-
+            hist_y[:, j] = est.y
             # velocity reset to the reference (keeps eq. 1's neglected dv / R terms negligible)
             dv_end = out["v_n"][:, -1, :2] - vref_b[j][:, -1, :2]
             st.v_n[:, :2] -= dv_end
-            reset_sum += dv_end
-
-            if fb_from is not None and j >= fb_from and (j - fb_from) % fb_every == 0:
-                # runs whose estimate is out of the small-angle range (not settled) are not corrected
-                ok = np.linalg.norm(psi, axis=-1) <= self.feedback_limit
-                d = np.where(ok[:, None], psi, 0.0)
-                st.C_bn[:] = apply_misalignment(st.C_bn, -d)
-                # exact change of the velocity-error rate: (exp([d x]) - I) f_n (= d x f_n to first order)
-                da = np.einsum("rij,rj->ri", rotvec_to_dcm(d), f_n) - f_n
-                # change of the psi rates (eq. 1 rows 3-5 for psi -> psi - d) and of the velocity-error
-                # accelerations: the ESO's steady ramp lag changes with them
-                dE = -(W * sl * d[:, 1] - W * cl * d[:, 2])
-                dN = W * sl * d[:, 0] + lat_rate * d[:, 2]
-                dU = -(W * cl * d[:, 0] + lat_rate * d[:, 1])
-                # d/dt (f x (-d) ) = f x dpsi' + f' x (-d), horizontal components
-                da_rate = np.stack([fN * dU - fU * dN - (df[:, 1] * d[:, 2] - df[:, 2] * d[:, 1]),
-                                    fU * dE - fE * dU - (df[:, 2] * d[:, 0] - df[:, 0] * d[:, 2])], axis=-1)
-                lead = (h + dt) / 2.0
-                if self.td == "fst":
-                    _, dz2 = eso.shift(da[:, :2], da_rate, lead=lead)
-                else:
-                    # da already holds the specific force as z2 sees it (G f): only the ramp of the psi rates'
-                    # change, f x dpsi', is new, with the ESO's exact lag from its response to Q
-                    da_rate = np.stack([fN * dU - fU * dN, fU * dE - fE * dU], axis=-1)
-                    c_next = (j + 1) * h
-                    e1, e2 = eso_q.z1 - q_mean(c_next), eso_q.z2 - c_next
-                    dz1 = da[:, :2] * lead + da_rate * (lead**2 / 2.0 + e1)
-                    dz2 = da[:, :2] + da_rate * (lead + e2)
-                    eso.z1, eso.z2 = eso.z1 + dz1, eso.z2 + dz2
-                # the TD's input q moves with the ESO's states: z22 (lag included) and, in the Coriolis
-                # term, dv_hat = z21 - resets, which from the next step on is da (h + lead) larger
-                dq_step = (dz2[:, 1] + cor * da[:, 0] * (h + lead)) / fU
-                dp_step = -(dz2[:, 0] - cor * da[:, 1] * (h + lead)) / fU
-                dq_rate = da_rate[:, 1] / fU - dq_step * df[:, 2] / fU
-                if self.td == "fst":
-                    td_q.x1 += dq_step + (h - 2.0 * h1) * dq_rate  # prediction for the next step, less the lag
-                    td_q.x2 += dq_rate
-                elif td_ls.origin is not None:
-                    # the fit's past moves by the line the correction would have made: its value now by the
-                    # jump of q (referred back from the next step's prediction), its slope -psiU by d_U
-                    td_ls.shift(dq_step - dq_rate * lead, d[:, 2], X)
-                    # p's past: its value by the jump of p, its slope by the change of psiN' (eq. 1 row 4)
-                    td_p.shift(dp_step - dN * lead, dN, np.broadcast_to(eso_q.z2[0], (R,)))
-                td_f.x1 += da  # the strapdown's f_n turns with its attitude: f_n <- exp([d x]) f_n
-                if self.td == "ls":
-                    eso_f.shift(da, lead=lead)
-                    s_jumps += eso_f.z2[:, 0] / eso_f.z2[:, 2] - s
-                psi_fb += d
-                psi = psi - d
+            est.reset_velocity(dv_end)
+            if est.feedback_due(j):
+                psi = est.feedback(j, psi, st)
             hist_psi[:, j] = psi
-            hist_fb[:, j] = psi_fb
+            hist_fb[:, j] = est.psi_fb
         if records > steps:  # the samples after the last step, through the strapdown, the last estimate removed
             sd.run(dth[:, steps * m:], dvel[:, steps * m:], record_every=t.size - steps * m)
             hist_t[-1], hist_C[:, -1] = t[-1], apply_misalignment(sd.state.C_bn, -hist_psi[:, -2])

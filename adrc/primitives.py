@@ -7,6 +7,11 @@ and returns arrays of the broadcast shape; the classes keep their states as such
 
 Units follow the plant: for a gyrocompass level channel the output y is a velocity error (m/s), the
 control u a commanded angular rate (rad/s) and b0 = -g or +g (m/s^2 per rad).
+
+The step ``h`` of these discrete forms is Han's symbol, kept so that the code reads as the equations: it is the
+interval at which the aligner steps them, its ``step_s`` option (:class:`adrc.gyrocompass.ADRCGyrocompass`,
+:class:`adrc.moving_base.ESOTDAligner`) rounded to whole IMU samples. ``h0`` and ``h1`` are not steps but
+fhan's and fst's precision (filter) factors, s.
 """
 
 from __future__ import annotations
@@ -157,6 +162,11 @@ def nlsef(e1, e2, z3, b0, r1, h1, c1):
 
 
 # ------------------------------------------------------- seed 001: fst tracking differentiator, 2nd-order ESO
+def _filled(value, like):
+    """A new float array of ``like``'s shape holding ``value`` (broadcast): a state's start."""
+    return np.array(np.broadcast_to(value, like.shape), dtype=float)
+
+
 def fst(x1, x2, v, r, h1):
     """Han's fst (seed 001, eq. 15 text): the TD's acceleration towards ``v``, bounded by ``r``.
 
@@ -215,8 +225,7 @@ class FSTTrackingDifferentiator:
 
     def reset(self, v, dv=0.0):
         """Start at rest on ``v`` (or moving at ``dv``)."""
-        self.x1 = np.array(np.broadcast_to(v, self.x1.shape), dtype=float)
-        self.x2 = np.array(np.broadcast_to(dv, self.x2.shape), dtype=float)
+        self.x1, self.x2 = _filled(v, self.x1), _filled(dv, self.x2)
 
     def update(self, v):
         """One step with input ``v``; returns (x1, x2) after the step."""
@@ -260,8 +269,7 @@ class SecondOrderESO:
 
     def reset(self, y, rate=0.0):
         """Start with z1 = y, z2 = rate."""
-        self.z1 = np.array(np.broadcast_to(y, self.z1.shape), dtype=float)
-        self.z2 = np.array(np.broadcast_to(rate, self.z2.shape), dtype=float)
+        self.z1, self.z2 = _filled(y, self.z1), _filled(rate, self.z2)
 
     def steady_lag(self, rate):
         """Steady-state errors of the discrete observer when y' is a ramp of slope ``rate`` (y'' = rate).

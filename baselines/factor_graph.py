@@ -11,7 +11,7 @@ The graph is a smoother (the result's ``causal`` is False): every keyframe's est
 
 The graph (one per recording)
 -----------------------------
-Keyframes ``k = 0 .. K-1`` lie every ``keyframe_s`` seconds from the initial state ``imu.t0``;
+Keyframes ``k = 0 .. K-1`` lie every ``step_s`` seconds (the graph's step) from the initial state ``imu.t0``;
 the last keyframe is the last sample (the final interval is between 0.5 and 1.5 keyframe
 intervals long). Each keyframe has a pose ``X(k)`` (``C_bn``, position) and a velocity ``V(k)``
 (ENU, m/s); bias keys ``B(j)`` (accelerometer m/s^2, gyro rad/s, body frame). Factors:
@@ -181,8 +181,8 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth, units
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable, initial_attitude
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.attitude import dcm_to_rotvec, orthonormalize
 from fusionbench.imu import IMUSpec, load_spec
 from fusionbench.imudata import IMUData
@@ -193,12 +193,10 @@ from .graph_support import (Posterior, _interval_rotations, _propagate, compensa
                             tile_scatter, tile_sums, tiles, velocity_error, velocity_factor)
 
 __all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "AdaptiveFactorGraphAligner", "keyframe_counts",
-           "compensated_increments", "MAX_LATITUDE_DEG", "noise_model"]
+           "compensated_increments", "noise_model"]
 
 #: Smallest reference noise used, m/s: an exact reference still gives well-conditioned velocity factors.
 VREF_SIGMA_FLOOR = 1e-3
-#: Highest |latitude| accepted, deg: the horizontal earth rate W cos(L) that sets the heading vanishes at the poles.
-MAX_LATITUDE_DEG = 89.0
 
 #: Defaults without an IMU model (``imu=None``): white noise of the seed000 preset ("Zhou 2011"),
 #: bias-prior sigmas ten times (gyro) and three times (accelerometer) seed000's biases.
@@ -257,7 +255,7 @@ def _scalar_or_axes(x):
     return float(x[0]) if np.all(x == x[0]) else x.copy()
 
 
-class FactorGraphAligner:
+class FactorGraphAligner(AlignerBase):
     """Factor-graph fine alignment (method ``gtsam``): gtsam ImuFactors with earth-rate Coriolis,
     velocity factors from every reference sample and a bias with zero-mean priors, solved by
     Levenberg-Marquardt (see the module docstring). A smoother: each keyframe's estimate uses the
@@ -265,8 +263,8 @@ class FactorGraphAligner:
 
     Parameters
     ----------
-    keyframe_s : float
-        Keyframe interval, s (default 1 s).
+    step_s : float
+        The graph's step: the keyframe interval, s (default 1 s), rounded to a whole number of IMU samples.
     imu : str, path, IMUSpec or None
         The sensor model (a preset name, an IMU spec TOML file or an IMUSpec, :func:`fusionbench.imu.load_spec`;
         default the ``navigation`` preset) from which the white-noise densities, the bias priors and the bias
@@ -332,17 +330,19 @@ class FactorGraphAligner:
     # not sway: with 1-s keyframes under seed 000's Table-1 sway its azimuth carries a second-order bias (-4.3
     # arcmin at 60 N: efficiency 1.6; 0.5-s keyframes -0.7); not tactical gyros: 1.7-5 bounds off (conformance)
     supports = Supports(bases=("static", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05)
+    #: Highest |latitude| accepted, deg: the horizontal earth rate W cos(L) that sets the heading vanishes at the poles.
+    max_latitude_deg = 89.0
     #: Keys of the per-recording extras that are the same for every recording (kept once).
     _shared_extra = ("adapt_window_t",)
 
-    def __init__(self, keyframe_s=1.0, imu="navigation", gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
+    def __init__(self, step_s=1.0, imu="navigation", gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
                  accel_bias_sigma=None, vref_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
                  bias_interval_s=None, max_iterations=100, recompensate_rad=1e-3, max_passes=3, marginals=True,
                  huber_k=1.345, coarse=None, init_sigma_deg=None):
         if not (isinstance(vref_sigma, (int, float)) and np.isfinite(vref_sigma) and vref_sigma >= 0):
             raise ValueError(f"vref_sigma: expected a non-negative standard deviation in m/s, found {vref_sigma!r}")
         vref_sigma = max(float(vref_sigma), VREF_SIGMA_FLOOR)  # an exact reference: a well-conditioned factor
-        positive = dict(keyframe_s=keyframe_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
+        positive = dict(step_s=step_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
                         integration_sigma=integration_sigma, recompensate_rad=recompensate_rad, huber_k=huber_k,
                         bias_interval_s=30.0 if bias_interval_s is None else bias_interval_s)
         for key, val in positive.items():
@@ -367,7 +367,7 @@ class FactorGraphAligner:
             self._positive("init_sigma_deg", init_sigma_deg), (3,)))
         self.coarse = InertialCoarseAligner() if coarse is None else coarse
         #: Shortest record, s: three keyframe intervals, and what the coarse initialisation needs.
-        self.min_duration_s = max(3.0 * self.keyframe_s, float(getattr(self.coarse, "min_duration_s", 0.0)))
+        self.min_duration_s = max(3.0 * self.step_s, float(getattr(self.coarse, "min_duration_s", 0.0)))
 
     @staticmethod
     def _positive(key, val):
@@ -378,44 +378,6 @@ class FactorGraphAligner:
         if arr.ndim > 1 or arr.size not in (1, 3) or not (np.all(np.isfinite(arr)) and np.all(arr > 0)):
             raise ValueError(f"{key}: expected a positive number, found {val!r}")
         return float(arr) if arr.ndim == 0 else arr
-
-    # ------------------------------------------------------------------------------------ checks
-    def _check(self, imu, site, vref, init):
-        check_azimuth_observable(self.spec, site, self.name)
-        if not isinstance(imu, IMUData):
-            raise ValueError(f"imu: expected an IMUData, found {type(imu).__name__}")
-        if not np.isfinite(site.lat) or abs(site.lat) > np.radians(MAX_LATITUDE_DEG):
-            raise ValueError(f"site latitude: {self.name} needs |latitude| <= {MAX_LATITUDE_DEG:g} deg "
-                             f"(the heading comes from the horizontal earth rate), found {np.degrees(site.lat):g} deg")
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s "
-                             f"(keyframes every {self.keyframe_s:g} s), found {imu.duration:g} s")
-        if self.keyframe_s < imu.dt:
-            raise ValueError(f"keyframe_s: expected at least the sample interval {imu.dt:g} s, "
-                             f"found {self.keyframe_s:g} s")
-        for nm, a in (("gyro", imu.gyro), ("accel", imu.accel)):
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"imu {nm}: expected finite samples, found NaN or inf")
-        M = imu.increments()[0].size
-        if vref is not None:
-            vref = np.asarray(vref, dtype=float)
-            if vref.ndim == 2:
-                vref = vref[None]
-            if vref.ndim != 3 or vref.shape[1:] != (M, 3) or vref.shape[0] not in (1, imu.runs):
-                raise ValueError(f"vref: expected shape ({imu.runs}, {M}, 3) (ENU m/s at the increment ends), "
-                                 f"found {vref.shape}")
-            if not np.all(np.isfinite(vref)):
-                raise ValueError("vref: expected finite velocities, found NaN or inf")
-            vref = np.broadcast_to(vref, (imu.runs, M, 3))
-        if init is not None:
-            try:
-                init = initial_attitude(init, imu.runs)
-            except ValueError:
-                raise ValueError(f"init: expected shape ({imu.runs}, 3, 3) or (3, 3), found {np.shape(init)}") from None
-            if not np.all(np.isfinite(init)) or np.any(np.linalg.det(init) < 0.5):
-                raise ValueError("init: expected finite rotation matrices (C_bn, body RFU to ENU)")
-            init = orthonormalize(init)
-        return vref, init
 
     # --------------------------------------------------------------------------------- the model
     def _huber_weights(self, problem, priors, values):
@@ -650,7 +612,7 @@ class FactorGraphAligner:
         return sol, {}
 
     # ------------------------------------------------------------------------------------- align
-    def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
+    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
         """Align every recording of ``imu`` by factor-graph smoothing, from any heading.
 
         Parameters
@@ -678,20 +640,23 @@ class FactorGraphAligner:
             sigmas, rad, ENU (with the bias priors; with the biases known); ``extra``: ``gyro_bias`` (R, 3) rad/s and ``accel_bias`` (R, 3)
             m/s^2, the estimated biases at the last keyframe, body frame; ``iterations``, ``passes``
             (R,) ints (LM iterations, graph builds); ``restarted`` (R,) bool (solved again from the
-            coarse alignment); ``graph_error`` (R,), the final cost; ``keyframe_s``; ``imu_model``
+            coarse alignment); ``graph_error`` (R,), the final cost; ``step_s``; ``imu_model``
             the IMU model's name (``"default"`` without one).
 
         Raises
         ------
         ValueError
-            Naming the field: latitude beyond 89 deg, a record shorter than ``min_duration_s``,
-            badly shaped ``vref`` or ``init``, non-finite samples.
+            Naming the field: beside the input policy of :class:`fusionbench.aligner_base.AlignerBase` (latitude
+            beyond 89 deg, a record shorter than ``min_duration_s``, badly shaped ``vref`` or ``init``,
+            non-finite samples), a keyframe interval shorter than the sample interval.
         """
-        vref, init = check_inputs(imu, vref, init, self.name)
-        vref, init = self._check(imu, site, vref, init)
+        if self.step_s < imu.dt:
+            raise ValueError(f"{self.name}: step_s: expected a keyframe interval of at least the sample interval "
+                             f"{imu.dt:g} s, found {self.step_s:g} s")
+        init = None if init is None else orthonormalize(init)
         t_end, dth, dvel = imu.increments()
         M, dt, R = t_end.size, imu.dt, imu.runs
-        counts = keyframe_counts(M, max(1, int(round(self.keyframe_s / dt))))
+        counts = keyframe_counts(M, max(1, int(round(self.step_s / dt))))
         K = counts.size
         t_kf = np.concatenate([[imu.t0], t_end[counts[1:] - 1]])
         T = np.diff(counts) * dt
@@ -737,7 +702,7 @@ class FactorGraphAligner:
                 sig[r], sig_noise[r] = marginal_sigmas(graph, values, C_kf, [B(j) for j in range(int(seg.max()) + 1)])
         extra = {"sigma_phi_noise": sig_noise, "gyro_bias": bg, "accel_bias": ba,
                  "iterations": iters, "passes": passes, "restarted": restarted, "graph_error": cost,
-                 "keyframe_s": self.keyframe_s}
+                 "step_s": self.step_s}
         for key in (per_run[0] if per_run else {}):
             stacked = np.stack([m[key] for m in per_run])
             extra[key] = stacked[0] if key in self._shared_extra else stacked

@@ -16,11 +16,12 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench.attitude import orthonormalize, rotvec_to_dcm, skew
-from fusionbench.strapdown import rodrigues
+from fusionbench.strapdown import coning_sculling, rodrigues
 
 
 def compensated_increments(dtheta, dvel):
-    """Coning- and sculling-compensated increments (the two-sample form of :mod:`fusionbench.strapdown`).
+    """Coning- and sculling-compensated increments of one recording
+    (:func:`fusionbench.strapdown.coning_sculling` from rest: no sample before the first).
 
     Parameters
     ----------
@@ -34,11 +35,9 @@ def compensated_increments(dtheta, dvel):
     dv : ndarray, shape (M, 3)
         Velocity increment resolved in the body frame at the start of the interval, m/s.
     """
-    th_prev = np.vstack([np.zeros((1, 3)), dtheta[:-1]])
-    dv_prev = np.vstack([np.zeros((1, 3)), dvel[:-1]])
-    phi = dtheta + np.cross(th_prev, dtheta) / 12.0
-    dv = dvel + 0.5 * np.cross(dtheta, dvel) + (np.cross(th_prev, dvel) + np.cross(dv_prev, dtheta)) / 12.0
-    return phi, dv
+    zero = np.zeros((1, 3))
+    phi, dv = coning_sculling(np.asarray(dtheta)[None], np.asarray(dvel)[None], zero, zero)
+    return phi[0], dv[0]
 
 
 def keyframe_counts(samples, per_keyframe):
@@ -368,25 +367,25 @@ class Posterior:
             Ri = R_inv if model is None else R_inv * model.sigmas()[None, :]
             if f in sel:  # a bias key: joint covariance of the biases
                 if parents:
-                    P = self._assemble(cov_b, parents)
-                    cross = -A @ P
-                    cov_b[f, f] = Ri @ Ri.T - cross @ A.T
-                    off = _offsets(parents)
-                    for j, p in enumerate(parents):
-                        cov_b[f, p] = cross[:, off[j]:off[j + 1]]
+                    self._condition(cov_b, f, parents, A, Ri, parents)
                 else:
                     cov_b[f, f] = Ri @ Ri.T
                 continue
-            P = self._assemble(cov, parents)
-            cross = -A @ P
-            cov[f, f] = Ri @ Ri.T - cross @ A.T
-            off = _offsets(parents)
-            for j, p in enumerate(parents):
-                if p not in sel:
-                    cov[f, p] = cross[:, off[j]:off[j + 1]]
+            self._condition(cov, f, parents, A, Ri, [p for p in parents if p not in sel])
             sens[f] = -A @ np.vstack([sens[p] for p in parents])
         self._cov, self._sens = cov, sens
         self.S_bb = self._assemble(cov_b, self.bias_keys) if nb else np.zeros((0, 0))
+
+    @classmethod
+    def _condition(cls, cov, f, parents, A, Ri, kept):
+        """The covariances of a frontal key ``f`` given its ``parents`` (whose joint covariance ``cov`` holds):
+        ``Sigma_ff = Ri Ri^T + A Sigma_PP A^T`` and ``Sigma_fp = -A Sigma_Pp`` for the parents ``kept``."""
+        cross = -A @ cls._assemble(cov, parents)
+        cov[f, f] = Ri @ Ri.T - cross @ A.T
+        off = _offsets(parents)
+        for j, p in enumerate(parents):
+            if p in kept:
+                cov[f, p] = cross[:, off[j]:off[j + 1]]
 
     @staticmethod
     def _assemble(cov, keys):

@@ -45,10 +45,10 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_azimuth_observable
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
-from fusionbench.compass import AzimuthFit, correct_azimuth, start_loop
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
 
 
 def sigma_of(td, xi):
@@ -71,13 +71,85 @@ def compass_gains(td, xi, ws2, g):
     return 2 * s, 4 * s**2 / ws2 - 1, 4 * s**4 / g, 2 * s
 
 
-class PIDGyrocompass:
+class PIDLoops:
+    """The PID gyrocompass's loops over R runs, stepped once per control step (the module docstring's names).
+
+    Each step takes the level velocity errors [vE, vN] and gives the commanded rate and the velocity the
+    damping terms remove. The east channel is always a third-order level loop (gains k1, k2, k3); the north
+    channel is one too, or, once the compass gains (c1..c4 of :func:`compass_gains`) are given, the compass loop.
+
+    Parameters
+    ----------
+    runs : int
+        R.
+    h : float
+        Control step, s (the aligner's ``step_s`` in whole samples).
+    radius : float
+        Earth radius at the site, m (the ``v / R`` of the proportional terms).
+    wN : float
+        Horizontal earth rate OMEGA_IE cos L, rad/s.
+
+    Attributes
+    ----------
+    J : ndarray, shape (R, 2)
+        Integral terms [of w_cE (north channel), of w_cN (east channel)], rad/s.
+    x : ndarray, shape (R,)
+        Compass-loop filter state, m/s s.
+    damp : ndarray, shape (R, 2)
+        Velocity removed by the damping terms so far, [E, N], m/s.
+    omega_c : ndarray, shape (R, 3)
+        Commanded rate [w_cE, w_cN, w_cU] of the last step, rad/s, ENU.
+    """
+
+    def __init__(self, runs, h, radius, wN):
+        self.h, self.radius, self.wN = h, radius, wN
+        self.J = np.zeros((runs, 2))
+        self.x = np.zeros(runs)
+        self.damp = np.zeros((runs, 2))
+        self.omega_c = np.zeros((runs, 3))
+
+    def frame_turned(self, az):
+        """The computed frame was turned by the azimuth ``az`` (R,) rad: shift the level integrators by the known
+        change of the earth-rate terms (eq. 19), so the level channels stay steady."""
+        self.J[:, 0] -= self.wN * np.sin(az)
+        self.J[:, 1] += self.wN * (1.0 - np.cos(az))
+
+    def step(self, vE, vN, level, compass=None):
+        """One control step with the velocity errors ``vE``, ``vN`` (R,) m/s.
+
+        ``level`` = (k1, k2, k3) of :func:`level_gains`; ``compass`` = (c1, c2, c3, c4) of :func:`compass_gains`
+        makes the north channel the compass loop. Updates :attr:`omega_c`; returns the velocity corrections
+        ``dE``, ``dN`` (R,) m/s that the damping terms take off the strapdown's velocity."""
+        h, radius = self.h, self.radius
+        k1, k2, k3 = level
+        J = self.J
+        # east channel: third-order level loop in every stage
+        J[:, 1] += k3 * vE * h
+        w_cN = (1 + k2) * vE / radius + J[:, 1]
+        dE = k1 * vE * h
+        if compass is None:
+            J[:, 0] += k3 * vN * h
+            w_cE = -(1 + k2) * vN / radius - J[:, 0]
+            w_cU = np.zeros(vN.shape)
+            dN = k1 * vN * h
+        else:
+            c1, c2, c3, c4 = compass
+            self.x += (vN - c4 * self.x) * h
+            w_cE = -(1 + c2) * vN / radius
+            w_cU = c3 / self.wN * self.x
+            dN = c1 * vN * h
+        self.damp += np.stack([dE, dN], axis=-1)
+        self.omega_c = np.stack([w_cE, w_cN, w_cU], axis=-1)
+        return dE, dN
+
+
+class PIDGyrocompass(AlignerBase):
     """Classical gyrocompass (method ``pid``): third-order level loops and a compass loop, staged.
 
     Parameters
     ----------
-    period : float
-        Control period, s.
+    step_s : float
+        Control step of the loops, s (rounded to a whole number of IMU samples).
     xi : float
         Damping ratio of the design (sqrt(2)/2).
     fit_from_s, shot_s : float
@@ -96,11 +168,13 @@ class PIDGyrocompass:
     # up to 70 deg: at 75 deg under seed 000's sway with a 0.05 m/s reference its azimuth ends 6 bounds off;
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.9 arcmin from the limit (conformance)
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=70.0, max_bias_ratio=0.05)
+    max_latitude_deg = MAX_LATITUDE_DEG
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
-    def __init__(self, period=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
+
+    def __init__(self, step_s=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
                  compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None):
         self.spec = None if imu is None else load_spec(imu)
-        self.period, self.xi = float(period), float(xi)
+        self.step_s, self.xi = float(step_s), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
         self.compass_stages = tuple(tuple(float(x) for x in st) for st in compass_stages)
         self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
@@ -114,12 +188,11 @@ class PIDGyrocompass:
         fitted azimuth) and the closing of the compass loop."""
         return [(float(self.shot_s), "azimuth shot"), (self.compass_stages[0][0], "compass loop closed")]
 
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
-        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring."""
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
-        loop = start_loop(self, imu, site, vref, init, self.period)
-        h, R, g = loop.period, loop.R, site.g
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+        """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
+        ``init`` the loop starts levelled with yaw 0."""
+        loop = CommandLoop(imu, site, init, self.step_s, vref)
+        h, R, g = loop.step_s, loop.R, site.g  # h: the step of the loops' Euler integration
         rm, rn = earth.radii(site.lat)
         radius = np.sqrt(rm * rn) + site.h
         ws2 = g / radius
@@ -128,48 +201,27 @@ class PIDGyrocompass:
         fit_from = int(round(self.fit_from_s / h))
         shot_step = max(int(round(self.shot_s / h)), fit_from + 4)
         stage_steps = [max(shot_step + 1, int(round(st[0] / h))) for st in self.compass_stages]
-        J = np.zeros((R, 2))        # integral terms [of w_cE (north channel), of w_cN (east channel)], rad/s
-        x_az = np.zeros(R)          # compass-loop filter state, m/s*s
-        damp = np.zeros((R, 2))     # velocity removed by the damping terms so far, [E, N], m/s
-        cmd = np.zeros((R, 3))
+        loops = PIDLoops(R, h, radius, wN)
         hist_t = np.empty(loop.records)
         hist_C = np.empty((R, loop.records, 3, 3))
         az_shot = np.full(R, np.nan)
         for j, t, dv in loop:
             if j >= fit_from and j <= shot_step:
-                fit.add(dv[:, :2] + damp, cmd[:, :2])
+                fit.add(dv[:, :2] + loops.damp, loops.omega_c[:, :2])
             if j == shot_step:
                 az_shot = fit.azimuth()
                 loop.sd.state.C_bn[:] = correct_azimuth(loop.sd.state.C_bn, az_shot)
-                J[:, 0] -= wN * np.sin(az_shot)
-                J[:, 1] += wN * (1.0 - np.cos(az_shot))
+                loops.frame_turned(az_shot)
             stage = int(np.searchsorted(stage_steps, j, side="right"))
             level_td = self.level_td_s if stage == 0 else self.compass_stages[stage - 1][1]
-            k1, k2, k3 = level_gains(level_td, self.xi, ws2, g)
-            vE, vN = dv[:, 0], dv[:, 1]
-            # east channel: third-order level loop in every stage
-            J[:, 1] += k3 * vE * h
-            w_cN = (1 + k2) * vE / radius + J[:, 1]
-            dE = k1 * vE * h
-            if stage == 0:
-                J[:, 0] += k3 * vN * h
-                w_cE = -(1 + k2) * vN / radius - J[:, 0]
-                w_cU = np.zeros(R)
-                dN = k1 * vN * h
-            else:
-                c1, c2, c3, c4 = compass_gains(self.compass_stages[stage - 1][2], self.xi, ws2, g)
-                x_az += (vN - c4 * x_az) * h
-                w_cE = -(1 + c2) * vN / radius
-                w_cU = c3 / wN * x_az
-                dN = c1 * vN * h
+            compass = None if stage == 0 else compass_gains(self.compass_stages[stage - 1][2], self.xi, ws2, g)
+            dE, dN = loops.step(dv[:, 0], dv[:, 1], level_gains(level_td, self.xi, ws2, g), compass)
             loop.sd.state.v_n[:, 0] -= dE
             loop.sd.state.v_n[:, 1] -= dN
-            damp += np.stack([dE, dN], axis=-1)
-            cmd = np.stack([w_cE, w_cN, w_cU], axis=-1)
-            loop.omega_c = cmd
+            loop.omega_c = loops.omega_c
             hist_t[j] = t
             hist_C[:, j] = loop.sd.state.C_bn
-        t_last = loop.finish()  # the samples after the last control period: the result ends at the last sample
+        t_last = loop.finish()  # the samples after the last control step: the result ends at the last sample
         if t_last is not None:
             hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot})

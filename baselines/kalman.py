@@ -1,7 +1,7 @@
 """Kalman fine alignment and its innovation-adaptive variant.
 
 After a coarse alignment (or from the scenario's initial guess), the shared strapdown runs on the
-IMU increments and an error-state filter per run estimates at ``rate_hz`` (the filters of all runs step
+IMU increments and an error-state filter per run estimates every ``step_s`` (the filters of all runs step
 together in a :class:`baselines.filter_bank.FilterBank`: filterpy's arithmetic on arrays over runs, or
 ``engine="filterpy"``, one :class:`filterpy.kalman.KalmanFilter` per run, the reference)::
 
@@ -13,7 +13,7 @@ gyro and accelerometer biases in the body frame, rad/s and m/s^2), with the psi-
     phi' = -[w_in x] phi - C_bn eps + w_g
     dv'  =  [f^n x] phi + C_bn nab - [(2 w_ie + w_en) x] dv + w_a      (east and north rows)
 
-the transition and process noise accumulated over the update interval (second-order expansion of
+the transition and process noise accumulated over the update interval T (``step_s``; second-order expansion of
 exp(F T) and of the Van Loan integral), and the measurement z = v_INS - v_ref (ENU, m/s; zero
 velocity on a stationary base). The update is filterpy's Joseph form. After each update the estimate is fed back: the attitude is
 turned by phi (C <- exp([phi x]) C), the velocity error removed, the biases added to the
@@ -33,9 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import (AlignmentResult, Site, Supports, azimuth_bias_ratio, check_azimuth_observable,
-                                 initial_attitude)
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Site, Supports, azimuth_bias_ratio, coarse_then_fine
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
@@ -73,13 +72,100 @@ def discretize(F, Qc, T):
     return Phi, Qc * T + (FQ + np.swapaxes(FQ, -1, -2)) * T * T / 2
 
 
-class KalmanAligner:
+class FeedbackKalman:
+    """R error-state Kalman filters, one per run, around one feedback-corrected strapdown (module docstring).
+
+    Each :meth:`step` integrates one update interval of bias-compensated increments through the strapdown, forms
+    the psi-angle model there (:func:`error_model`, :func:`discretize`), predicts and updates the filters with
+    the measurement ``z = v_INS - v_ref`` and feeds the estimate back into the strapdown and the biases.
+
+    Parameters
+    ----------
+    sd : fusionbench.strapdown.Strapdown
+        The strapdown of the R runs.
+    bank : baselines.filter_bank.FilterBank
+        The filters (``x``, ``P``, ``H``, ``R``).
+    qc : ndarray, shape (11,)
+        Continuous noise densities of the states (:meth:`KalmanAligner._qc`).
+    T, dt : float
+        Update interval and sample interval, s.
+    q_scale, update : callable
+        The aligner's hooks: ``q_scale(bank)`` the factor (R,) on Q in the prediction, ``update(bank, z, k)`` the
+        measurement update k (the adaptive variant adapts R and Q there).
+
+    Attributes
+    ----------
+    x, P : ndarray
+        The filters' state (R, 11) and covariance (R, 11, 11) (the bank's; ``x`` is zero after each feedback).
+    z : ndarray, shape (R, 2)
+        The last measurement, m/s.
+    eps_hat, nab_hat : ndarray, shape (R, 3)
+        Gyro (rad/s) and accelerometer (m/s^2) biases fed back so far, body frame.
+    """
+
+    def __init__(self, sd, bank, qc, T, dt, q_scale, update):
+        self.sd, self.bank, self.qc, self.T, self.dt = sd, bank, qc, T, dt
+        self._q_scale, self._update = q_scale, update
+        R = sd.runs
+        self.z = np.zeros((R, 2))
+        self.eps_hat = np.zeros((R, 3))
+        self.nab_hat = np.zeros((R, 3))
+
+    @property
+    def x(self):
+        """The filters' error state (R, 11) (zero after each feedback)."""
+        return self.bank.x
+
+    @property
+    def P(self):
+        """The filters' covariance (R, 11, 11)."""
+        return self.bank.P
+
+    def step(self, dth, dv, v_ref, k):
+        """Step k over the increments ``dth``, ``dv`` (R, m, 3) of one update interval; ``v_ref`` (R, 2) m/s the
+        reference's horizontal velocity at its end (None: zero). Returns the misalignment sigma (R, 3) rad, ENU."""
+        sd, bank, qc, T, dt = self.sd, self.bank, self.qc, self.T, self.dt
+        R = dth.shape[0]
+        g_in = dth - self.eps_hat[:, None] * dt
+        a_in = dv - self.nab_hat[:, None] * dt
+        C_prev = sd.state.C_bn.copy()
+        sd.run(g_in, a_in, record_every=dth.shape[1])
+        st = sd.state
+        f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
+        w_ie = earth.earth_rate_n(st.lat)
+        w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
+        F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en)
+        Qc = np.zeros((R, NX, NX))
+        Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
+        Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
+        Qc[:, 5:, 5:] = np.diag(qc[5:])
+        Phi, Qd = discretize(F, Qc, T)
+        self.z = st.v_n[:, :2] - (0.0 if v_ref is None else v_ref)
+        bank.predict(Phi, Qd * np.reshape(self._q_scale(bank), (-1, 1, 1)))
+        self._update(bank, self.z, k)
+        x = self.x.copy()
+        bank.reset_x()  # feedback below resets every state
+        sigma = np.sqrt(np.diagonal(self.P, axis1=1, axis2=2)[:, :3])
+        st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
+        st.v_n[:, :2] -= x[:, 3:5]
+        self.eps_hat += x[:, 5:8]
+        self.nab_hat += x[:, 8:11]
+        return sigma
+
+    def coast(self, dth, dv):
+        """Integrate the increments ``dth``, ``dv`` (R, n, 3) through the bias-compensated strapdown, no update."""
+        self.sd.run(dth - self.eps_hat[:, None] * self.dt, dv - self.nab_hat[:, None] * self.dt,
+                    record_every=dth.shape[1])
+
+
+class KalmanAligner(AlignerBase):
     """Kalman fine alignment (method ``kf``) on filterpy, feedback-corrected strapdown.
 
     Parameters
     ----------
-    rate_hz : float
-        Filter rate, Hz (10).
+    step_s : float
+        Filter step, s (0.1: 10 Hz), rounded to a whole number of IMU samples: the interval of its predictions
+        and updates.
     imu : str, path or IMUSpec
         Noise model of the filter (:func:`fusionbench.imu.load_spec`): a preset name, an IMU spec TOML
         file or an IMUSpec; default the ``navigation`` preset. Its white noises give Q; its bias sigmas
@@ -106,14 +192,17 @@ class KalmanAligner:
     # not moving: on the 0.1 g moving base it ends 1.3-1.7 bounds off with a -1.2 to -1.4 arcmin mean azimuth offset
     # whatever the heading (gtsam 1.0 on the same data); not tactical gyros: 1.5-2.1 bounds off (conformance)
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=89.0, max_bias_ratio=0.05)
+    max_latitude_deg = 89.0
     description = "Kalman fine alignment (11-state psi-angle model, filterpy arithmetic batched over runs, feedback), coarse start"
 
-    def __init__(self, rate_hz=10.0, imu="navigation", vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0,
+    def __init__(self, step_s=0.1, imu="navigation", vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0,
                  engine="numpy"):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, found {engine!r}")
         self.engine = engine
-        self.rate_hz = float(rate_hz)
+        self.step_s = float(step_s)
+        if not (np.isfinite(self.step_s) and self.step_s > 0):
+            raise ValueError(f"step_s: expected a positive filter step in s, found {step_s!r}")
         self.spec = load_spec(imu)
         self.vref_sigma = float(vref_sigma)
         if not (np.isfinite(self.vref_sigma) and self.vref_sigma >= 0):
@@ -168,79 +257,41 @@ class KalmanAligner:
         bank.update(z)
 
     # ---------------------------------------------------------------- alignment
-    def align(self, imu, site: Site, vref=None, init=None) -> AlignmentResult:
-        """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None)."""
-        vref, init = check_inputs(imu, vref, init, self.name)
-        if abs(np.degrees(site.lat)) > 89.0:
-            raise ValueError(f"latitude: {self.name} needs |latitude| <= 89 deg, found {np.degrees(site.lat):.3f} deg")
-        if imu.duration < self.min_duration_s:
-            raise ValueError(f"duration: {self.name} needs at least {self.min_duration_s:g} s, found {imu.duration:g} s")
-        check_azimuth_observable(self.spec, site, self.name)
+    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+        """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None): from ``init``, or
+        after an inertial-frame coarse alignment over the first ``coarse_s`` seconds."""
+        if init is not None:
+            return self._fine(imu, site, vref, init, np.zeros((imu.runs, 3)) if vref is None else vref[:, 0], imu.dt)
+        coarse = InertialCoarseAligner(history_points=20, caller=self.name)
+        # the fine stage keeps the whole record's sample interval (the rest's own, from its span, differs in the
+        # last bits) and starts at the reference velocity at the hand-over
+        return coarse_then_fine(imu, site, vref, coarse, self.coarse_s, lambda rest, vr, C0, v0: self._fine(
+            rest, site, vr, C0, np.zeros((imu.runs, 3)) if v0 is None else v0, imu.dt))
+
+    def _fine(self, imu, site, vref, C0, v0, dt) -> AlignmentResult:
+        """The filter around the feedback-corrected strapdown from attitude ``C0`` (R, 3, 3) and velocity ``v0``
+        (R, 3) m/s ENU, with sample interval ``dt`` (s)."""
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
-        C0 = initial_attitude(init, R)
-        k0 = 0
-        hist_t, hist_C, hist_s = [], [], []
-        if C0 is None:  # coarse alignment on the first coarse_s seconds, then fine alignment from there
-            k0 = int(round(self.coarse_s / imu.dt))
-            coarse = InertialCoarseAligner(history_points=20, caller=self.name).align(
-                imu.__class__(t[:k0], dth[:, :k0], dv[:, :k0]), site, vref=None if vref is None else vref[:, :k0])
-            C0 = coarse.C_bn_final
-            hist_t.append(coarse.t)
-            hist_C.append(coarse.C_bn)
-            hist_s.append(np.full(coarse.C_bn.shape[:2] + (3,), np.nan))
-        v0 = np.zeros((R, 3)) if vref is None else vref[:, max(k0 - 1, 0)]
-        sd = Strapdown(NavState.broadcast(R, C0, v0, site.lat, site.lon, site.h), imu.dt, height_fixed=True)
-        m = max(1, int(round(1.0 / (self.rate_hz * imu.dt))))
-        T = m * imu.dt
-        steps = (N - k0) // m
-        tail = N - k0 - steps * m  # samples after the last filter step, integrated at the end (time rule)
-        qc = self._qc()
-        P0 = self._p0(site.lat)
-        bank = self._new_bank(R, P0)
-        eps_hat = np.zeros((R, 3))
-        nab_hat = np.zeros((R, 3))
+        sd = Strapdown(NavState.broadcast(R, C0, v0, site.lat, site.lon, site.h), dt, height_fixed=True)
+        m = max(1, int(round(self.step_s / dt)))
+        T = m * dt  # the filter's update interval: step_s in whole samples
+        steps = N // m
+        tail = N - steps * m  # samples after the last filter step, integrated at the end (time rule)
+        kf = FeedbackKalman(sd, self._new_bank(R, self._p0(site.lat)), self._qc(), T, dt, self._q_scale, self._update)
         out_t = np.empty(steps + (tail > 0))
         out_C = np.empty((R, steps + (tail > 0), 3, 3))
         out_s = np.empty((R, steps + (tail > 0), 3))
         for j in range(steps):
-            a, b = k0 + j * m, k0 + (j + 1) * m
-            g_in = dth[:, a:b] - eps_hat[:, None] * imu.dt
-            a_in = dv[:, a:b] - nab_hat[:, None] * imu.dt
-            C_prev = sd.state.C_bn.copy()
-            sd.run(g_in, a_in, record_every=m)
-            st = sd.state
-            f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
-            w_ie = earth.earth_rate_n(st.lat)
-            w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
-            F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en)
-            Qc = np.zeros((R, NX, NX))
-            Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
-            Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
-            Qc[:, 5:, 5:] = np.diag(qc[5:])
-            Phi, Qd = discretize(F, Qc, T)
-            z = st.v_n[:, :2] - (0.0 if vref is None else vref[:, b - 1, :2])
-            bank.predict(Phi, Qd * np.reshape(self._q_scale(bank), (-1, 1, 1)))
-            self._update(bank, z, j)
-            x = bank.x.copy()
-            bank.reset_x()  # feedback below resets every state
-            out_s[:, j] = np.sqrt(np.diagonal(bank.P, axis1=1, axis2=2)[:, :3])
-            st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
-            st.v_n[:, :2] -= x[:, 3:5]
-            eps_hat += x[:, 5:8]
-            nab_hat += x[:, 8:11]
+            a, b = j * m, (j + 1) * m
+            out_s[:, j] = kf.step(dth[:, a:b], dv[:, a:b], None if vref is None else vref[:, b - 1, :2], j)
             out_t[j] = t[b - 1]
-            out_C[:, j] = st.C_bn
+            out_C[:, j] = sd.state.C_bn
         if tail:  # the last samples, through the bias-compensated strapdown without an update
-            a = N - tail
-            sd.run(dth[:, a:] - eps_hat[:, None] * imu.dt, dv[:, a:] - nab_hat[:, None] * imu.dt, record_every=tail)
+            kf.coast(dth[:, N - tail:], dv[:, N - tail:])
             out_t[-1], out_C[:, -1], out_s[:, -1] = t[-1], sd.state.C_bn, out_s[:, -2] if steps else np.nan
-        hist_t.append(out_t)
-        hist_C.append(out_C)
-        hist_s.append(out_s)
-        return AlignmentResult(self.name, np.concatenate(hist_t), np.concatenate(hist_C, axis=1),
-                               {"gyro_bias": eps_hat, "accel_bias": nab_hat},
-                               sigma_phi=np.concatenate(hist_s, axis=1), imu_model=self.spec.name)
+        return AlignmentResult(self.name, out_t, out_C, {"gyro_bias": kf.eps_hat, "accel_bias": kf.nab_hat},
+                               sigma_phi=out_s, imu_model=self.spec.name)
 
 
 class AdaptiveKalmanAligner(KalmanAligner):

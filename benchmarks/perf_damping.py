@@ -46,7 +46,7 @@ def navigate(scn, scheme, runs, seed, duration):
     nav = DampedNavigator(**opts)
     init = scn.initial_guess(traj.truth([0.0]).C_bn[0])
     t0 = time.perf_counter()
-    res = nav.navigate(_stream(scn, traj, runs, seed, duration), scn.site, init, dt=scn.dt, runs=runs)
+    res = nav.navigate_chunks(_stream(scn, traj, runs, seed, duration), scn.site, init, dt=scn.dt, runs=runs)
     wall = time.perf_counter() - t0
     a, b = scn.feature("windows").rmse_window_s
     sel = (res.t >= a) & (res.t <= b)

@@ -79,7 +79,7 @@ def aligners():
 
 
 def control_period(aligner):
-    return aligner.h if hasattr(aligner, "h") else aligner.period
+    return aligner.step_s
 
 
 def head(data, vref, init, runs, samples):
@@ -176,7 +176,6 @@ _PARTS = [
     ("CommandLoop step (slicing, vref mean)", "compass.py", "__iter__"),
     ("AzimuthFit.add", "compass.py", "add"),
     ("AzimuthFit.azimuth (6x6 solve, 10 Hz)", "compass.py", "azimuth"),
-    ("AzimuthFit.azimuth (6x6 solve, 10 Hz)", "compass.py", "initial_azimuth"),
     ("correct_azimuth", "compass.py", "correct_azimuth"),
     ("PID gain formulas (every step)", "gyrocompass.py", "level_gains"),
     ("PID gain formulas (every step)", "gyrocompass.py", "compass_gains"),

@@ -33,9 +33,13 @@ takes its height from outside. The map is evaluated once on a fine log-spaced gr
 interpolated at each step (within 1e-3 in q of the regressor itself).
 
 Memory: the data are processed step by step and the history is kept once per step (attitude,
-q), so a 20-hour run at 5 Hz holds 72 000 attitudes per run besides its input; :meth:`navigate`
-takes the IMU data as an iterator of chunks (e.g. :func:`fusionbench.imu.simulate_chunks`), so the
-input need not be held either.
+q), so a 20-hour run at 5 Hz holds 72 000 attitudes per run besides its input;
+:meth:`DampedNavigator.navigate_chunks` takes the IMU data as an iterator of chunks (e.g.
+:func:`fusionbench.imu.simulate_chunks`), so the input need not be held either.
+
+:class:`DampedNavigator` is a :class:`fusionbench.aligner.Navigator` (``navigate(imu, site, init, vref=None)``);
+its ``align`` is the adapter the runner calls, through the input policy of
+:class:`fusionbench.aligner_base.AlignerBase` (which refuses it without ``init``: ``supports.needs_init``).
 """
 
 from __future__ import annotations
@@ -46,9 +50,10 @@ import numba
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Supports, initial_attitude
-from fusionbench.inputs import check_inputs
+from fusionbench.aligner import AlignmentResult, Supports
+from fusionbench.aligner_base import AlignerBase
 from fusionbench.imudata import IMUData
+from fusionbench.inputs import check_init
 from fusionbench.strapdown import NavState, Strapdown, integrate_compiled
 
 from . import network, qmap
@@ -76,7 +81,7 @@ def q_for_damping(xi):
     return float(np.clip(1.0 + float(xi) / 0.09, qmap.Q_MIN, qmap.Q_MAX))
 
 
-class DampedNavigator:
+class DampedNavigator(AlignerBase):
     """Free-inertial ENU navigation with the seed-004 damping network in both level loops.
 
     Parameters
@@ -145,11 +150,13 @@ class DampedNavigator:
         """Stages for the figures (:mod:`fusionbench.figures`), s: the network switched in at ``damp_from_s``."""
         return [] if self.scheme == "undamped" else [(self.damp_from_s, "damping network switched in")]
 
-    #: Axis labels of the series of :meth:`align` for the figures (q is a pure number).
+    #: Axis labels of the series of :meth:`navigate` for the figures (q is a pure number).
     series_labels = {"q_E": "q_E, east velocity (1 = off)", "q_N": "q_N, north velocity (1 = off)"}
 
-    def align(self, imu: IMUData, site, vref=None, init=None) -> AlignmentResult:
-        """Navigate R recordings from the initial attitude ``init``, at rest at ``site``.
+    def navigate(self, imu: IMUData, site, init, vref=None) -> AlignmentResult:
+        """Navigate R recordings from the initial attitude ``init``, at rest at ``site``
+        (:class:`fusionbench.aligner.Navigator`; the input policy of :class:`fusionbench.aligner_base.AlignerBase`
+        first).
 
         Parameters
         ----------
@@ -157,10 +164,11 @@ class DampedNavigator:
             Recordings, body RFU; increments or rates.
         site : fusionbench.aligner.Site
             Initial latitude, longitude (rad) and height (m); the vehicle starts at rest.
-        vref : ignored
-            Internal damping uses no external velocity.
         init : ndarray, shape (R, 3, 3) or (3, 3)
             Initial attitude C_bn (body RFU to ENU), e.g. the result of an alignment.
+        vref : ndarray, shape (R, M, 3), optional
+            Reference velocity (ENU, m/s) at the increment ends: read only by the adaptive scheme with
+            ``accel_source="vref"`` (its acceleration); internal damping uses no external velocity.
 
         Returns
         -------
@@ -169,17 +177,26 @@ class DampedNavigator:
             coefficients of the networks on the east and north velocity (1: not engaged),
             ``figures`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
         """
-        vref, init = check_inputs(imu, vref, init, self.name)
+        vref, init = self.check(imu, site, vref, init)
+        return self._navigate(imu, site, init, vref)
+
+    def _align(self, imu: IMUData, site, vref, init) -> AlignmentResult:
+        """The adapter the runner calls (``align``): after the input policy, which requires ``init``, the
+        navigation of :meth:`navigate`."""
+        return self._navigate(imu, site, init, vref)
+
+    def _navigate(self, imu: IMUData, site, init, vref) -> AlignmentResult:
+        """:meth:`navigate` on checked arguments: the record in chunks of an hour (:meth:`navigate_chunks`)."""
         t, dth, dv = imu.increments()
         if self.scheme == "adaptive" and self.accel_source == "vref" and vref is None:
-            raise ValueError("damped-nav vref: accel_source 'vref' needs a reference velocity, found none")
-        vref = np.asarray(vref, dtype=float) if vref is not None and self.accel_source == "vref" else None
+            raise ValueError(f"{self.name}: vref: accel_source 'vref' needs a reference velocity, found none")
+        vref = vref if self.accel_source == "vref" else None
         chunk = max(1, int(round(3600.0 / imu.dt)))
         chunks = ((IMUData(t[k:k + chunk], dth[:, k:k + chunk], dv[:, k:k + chunk], "increment"),
                    None if vref is None else vref[:, k:k + chunk]) for k in range(0, t.size, chunk))
-        return self.navigate(chunks, site, init, dt=imu.dt, t0=imu.t0, runs=imu.runs)
+        return self.navigate_chunks(chunks, site, init, dt=imu.dt, t0=imu.t0, runs=imu.runs)
 
-    def navigate(self, chunks, site, init, dt, t0=0.0, runs=None):
+    def navigate_chunks(self, chunks, site, init, dt, t0=0.0, runs=None):
         """Navigate increments given as an iterator of ``(IMUData, vref)`` chunks, consecutive.
 
         Each IMUData chunk is of kind ``"increment"``; ``vref`` is the reference velocity (R, n, 3),
@@ -188,14 +205,11 @@ class DampedNavigator:
         chunk's whole network steps are carried into the next chunk; those after the last whole step of
         the data go through the strapdown alone (less than one step: the network's command over it turns
         the attitude by well under 0.001 arcmin), so the history ends at the last sample. Returns what
-        :meth:`align` returns.
+        :meth:`navigate` returns. The chunks' samples are not checked (a stream is not held); ``init`` is.
         """
-        if init is None:
-            raise ValueError("damped-nav init: expected an initial attitude C_bn (navigation starts from an "
-                             "alignment), found none")
         n_sub = int(round(self.step_s / dt))
         if n_sub < 1 or abs(n_sub * dt - self.step_s) > 1e-6 * self.step_s:
-            raise ValueError(f"damped-nav step_s: expected a whole number of samples of {dt:g} s, found {self.step_s:g} s")
+            raise ValueError(f"{self.name}: step_s: expected a whole number of samples of {dt:g} s, found {self.step_s:g} s")
         loop = None
         ts, Cs, qs = [], [], []
         left = None  # samples after the last whole step: (t, dth, dv, vref)
@@ -207,7 +221,7 @@ class DampedNavigator:
                 vref = None if vref is None else np.concatenate([left[3], vref], axis=1)
             if loop is None:
                 runs = dth.shape[0] if runs is None else runs
-                loop = _Loop(self, site, initial_attitude(init, runs), dt, n_sub, t0)
+                loop = _Loop(self, site, check_init(init, runs, self.name, required=True), dt, n_sub, t0)
             n = (t.size // n_sub) * n_sub
             left = (t[n:], dth[:, n:], dv[:, n:], None if vref is None else vref[:, n:])
             if n == 0:
@@ -217,7 +231,7 @@ class DampedNavigator:
             Cs.append(C)
             qs.append(q)
         if loop is None or not ts:
-            raise ValueError(f"damped-nav data: expected at least one step of {self.step_s:g} s of samples, found none")
+            raise ValueError(f"{self.name}: imu: expected at least one step of {self.step_s:g} s of samples, found none")
         if left[0].size:  # the time rule: the history ends at the last sample
             loop.sd.run(left[1], left[2], record_every=left[0].size)
             ts.append(left[0][-1:])
@@ -363,7 +377,7 @@ class _Loop:
         v_track = np.zeros((runs, 0, 2))
         if self.use_vref:
             if vref is None:
-                raise ValueError("damped-nav vref: accel_source 'vref' needs a reference velocity, found none")
+                raise ValueError("damped-nav: vref: accel_source 'vref' needs a reference velocity, found none")
             v_track = np.ascontiguousarray(vref[:, :steps * ns, :2].reshape(runs, steps, ns, 2).mean(axis=2))
         out_C = np.empty((runs, steps, 3, 3))
         out_q = np.ones((runs, steps, 2))

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import signal
-from scipy.optimize import brentq, minimize_scalar
+from scipy.optimize import brentq
 
 from fusionbench import earth
 
@@ -52,25 +52,26 @@ def phase_peak_x(q):
 
 
 def printed_phase_peak_x(q):
-    """The paper's closed form for wc T: ((q + 1)(q - sqrt(q^2 + 1)) + 1)^(1/4) / q^(3/4).
+    """The paper's printed closed form for wc T: ((q + 1)(q - sqrt(q^2 + 1)) + 1)^(1/4) / q^(3/4).
 
-    It matches the true phase peak (:func:`phase_peak_x`) only near q = 3 (1 % there); it is 29 % high
-    at q = 1.5 and 27 % low at q = 8, so it is not used."""
+    Not used by the navigator: it matches the true phase peak (:func:`phase_peak_x`) only near q = 3 (1 %
+    there); it is 29 % high at q = 1.5 and 27 % low at q = 8. Kept as documented API, the paper's formula
+    as printed, so that the reproduction check of that claim (``tests/test_damping_network.py``) reads it here."""
     q = float(q)
     X = (q + 1) * (q - np.sqrt(q * q + 1)) + 1
     return X**0.25 / q**0.75
 
 
-_c = phase_peak_x
-
-
 def time_constant(q, ws=WS):
     """Network time constant T (s) for coefficient q, with wc at the loop's crossover (module docstring)."""
-    return np.sqrt(_c(q) / q) / ws
+    return np.sqrt(phase_peak_x(q) / q) / ws
 
 
 def crossover(q, ws=WS):
-    """Crossover frequency wc (rad/s) = q T ws^2 = frequency of the network's largest phase lead."""
+    """Crossover frequency wc (rad/s) = q T ws^2 = frequency of the network's largest phase lead (eq. 5).
+
+    Documented API for the paper's closed-form relation; the navigator uses :func:`time_constant`, and
+    ``tests/test_damping_network.py`` checks this frequency against the numerically found peak of H's phase."""
     return q * time_constant(q, ws) * ws**2
 
 
@@ -96,7 +97,10 @@ def closed_loop(q, ws=WS):
 
 
 def gyro_to_attitude(q, ws=WS):
-    """da / eps_E = s / (s^2 + H ws^2) (eq. 1), rad per rad/s."""
+    """da / eps_E = s / (s^2 + H ws^2) (eq. 1), rad per rad/s.
+
+    Documented API, the paper's eq. 1 as a transfer function (the navigator's loop is the strapdown's own;
+    ``tests/test_damping_network.py`` checks the undamped loop's Schuler period through it)."""
     _, den, char = _polys(q, ws)
     return signal.TransferFunction(np.polymul([1.0, 0.0], den), char)
 
@@ -156,15 +160,6 @@ def simulated_peak_error(accel, q, ws=WS, hours=3.0):
     return float(np.max(np.abs(y)))
 
 
-def phase_peak_frequency(q, ws=WS):
-    """Frequency (rad/s) of the largest phase lead of H, found numerically (checks ``crossover``)."""
-    H = network(q, ws)
-    res = minimize_scalar(lambda lw: -np.angle(signal.freqresp(H, [10**lw])[1][0]),
-                          bounds=(np.log10(ws) - 3, np.log10(ws) + 3), method="bounded",
-                          options={"xatol": 1e-10})
-    return 10**res.x
-
-
 def gain(q):
     """k(q) = (q - 1)^2 / q, the weight of the lag difference in the realisation of H (see :func:`state_space`)."""
     q = np.asarray(q, dtype=float)
@@ -195,7 +190,9 @@ class DiscreteNetwork:
     Each grid point is discretised with :func:`scipy.signal.cont2discrete` (zero-order hold); between
     grid points the discrete matrices are interpolated linearly in q (grid step 0.005: the
     interpolation error is below 1e-9 of the state). One step is ``x <- Ad(q) x + Bd(q) u`` after the
-    output ``y = u + k(q) (x1 - x2)``.
+    output ``y = u + k(q) (x1 - x2)``. The navigator reads the tables ``q``, ``Ad``, ``Bd`` in its numba kernel,
+    which inlines that step; :meth:`matrices`, :meth:`output` and :meth:`step` are its NumPy reference (the
+    tests check the tables and the step against the continuous network through them).
 
     Parameters
     ----------

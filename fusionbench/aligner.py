@@ -271,7 +271,8 @@ def supports(method) -> Supports:
 
 @runtime_checkable
 class Aligner(Protocol):
-    """Protocol of an alignment method (structural: no base class needed).
+    """Protocol of an alignment method (structural: no base class needed; the project's methods implement it on
+    :class:`fusionbench.aligner_base.AlignerBase`, which applies one input policy to every method).
 
     ``min_duration_s`` is the shortest recording the method accepts, s. Optional attributes:
     ``supports`` (a :class:`Supports`: the bases and latitudes it claims; default static and sway up to
@@ -299,6 +300,44 @@ class Aligner(Protocol):
             (``imu.increments()[0]``); None means a stationary base (zero velocity).
         init : ndarray, shape (R, 3, 3) or (3, 3), optional
             Initial attitude guess C_bn; None lets the method initialise itself.
+        """
+        ...
+
+
+@runtime_checkable
+class Navigator(Protocol):
+    """Protocol of a navigation method: free-inertial navigation from a given attitude (structural).
+
+    A navigator does not align: it carries an attitude it is given (e.g. an alignment's result) through the
+    record, as ``damped-nav`` does. Registered in the ``fusionbench.methods`` group beside the aligners, it
+    also has ``align(imu, site, vref=None, init=None)`` for the runner, which needs ``init``, and declares
+    ``supports.needs_init`` (:class:`Supports`), so that the conformance matrix leaves it out.
+    """
+
+    name: str
+    description: str
+
+    def navigate(self, imu: IMUData, site: Site, init, vref=None) -> AlignmentResult:
+        """Navigate a batch of recordings from the initial attitude ``init``.
+
+        Parameters
+        ----------
+        imu : IMUData
+            R recordings on one time grid, body frame RFU (x right, y forward, z up): angle (rad) and velocity
+            (m/s) increments, or angular rates (rad/s) and specific forces (m/s^2).
+        site : Site
+            Latitude and longitude (rad) and height (m) at the initial state (``damped-nav`` starts at rest there).
+        init : ndarray, shape (R, 3, 3) or (3, 3)
+            Initial attitude ``C_bn`` (body RFU to navigation ENU) at the initial state ``imu.t0``.
+        vref : ndarray, shape (R, M, 3), optional
+            Reference velocity (ENU, m/s) at the end of each increment interval (``imu.increments()[0]``), for a
+            navigator that reads one (e.g. an acceleration from a log); None: not given.
+
+        Returns
+        -------
+        AlignmentResult
+            The attitude history ``C_bn`` (R, M, 3, 3), body RFU to ENU, at times ``t`` (M,) s, ending at the
+            last sample (the module's time rule).
         """
         ...
 
@@ -401,30 +440,26 @@ def variant(base, class_name: str, name: str, description: str, **options):
                                       "__module__": base.__module__, "__qualname__": class_name})
 
 
-def initial_attitude(init, runs):
-    """Broadcast an ``init`` guess to (runs, 3, 3), or None."""
-    if init is None:
-        return None
-    return np.broadcast_to(np.asarray(init, dtype=float), (runs, 3, 3)).copy()
-
-
 def coarse_then_fine(imu: IMUData, site: Site, vref, coarse, coarse_s: float, fine):
     """Initialise with a coarse aligner on the first ``coarse_s`` seconds, then run ``fine`` on the rest.
 
     For fine aligners that need an initial attitude within a few degrees but must accept any
-    heading. ``coarse`` is an aligner (e.g. ``fusionbench.coarse.InertialCoarseAligner``);
-    ``fine(imu_rest, vref_rest, C0)`` returns the fine aligner's AlignmentResult on the remaining
-    increments from the coarse attitude ``C0`` (R, 3, 3). The histories are joined; arrays of the
-    fine result's ``extra`` shaped (R, M, ...) get NaN over the coarse part.
+    heading. ``coarse`` is an aligner (e.g. ``fusionbench.coarse.InertialCoarseAligner``), given the same part
+    of ``vref`` (R, M, 3) when there is one; ``fine(imu_rest, vref_rest, C0, v0)`` returns the fine aligner's
+    AlignmentResult on the remaining increments from the coarse attitude ``C0`` (R, 3, 3), with ``v0`` (R, 3)
+    the reference velocity at the hand-over (the coarse part's last sample; None without a reference). The
+    histories are joined; arrays of the fine result's ``extra`` shaped (R, M, ...) get NaN over the coarse part.
     """
     t, dth, dv = imu.increments()
     k0 = int(round(coarse_s / imu.dt))
     if not 0 < k0 < t.size - 1:
         raise ValueError(f"duration: the coarse stage of {coarse_s:g} s leaves no data for fine alignment "
                          f"in {imu.duration:g} s")
-    first = coarse.align(IMUData(t[:k0], dth[:, :k0], dv[:, :k0], "increment"), site)
+    vref = None if vref is None else np.asarray(vref)
+    first = coarse.align(IMUData(t[:k0], dth[:, :k0], dv[:, :k0], "increment"), site,
+                         vref=None if vref is None else vref[:, :k0])
     rest = IMUData(t[k0:], dth[:, k0:], dv[:, k0:], "increment")
-    res = fine(rest, None if vref is None else np.asarray(vref)[:, k0:], first.C_bn_final)
+    res = fine(rest, None if vref is None else vref[:, k0:], first.C_bn_final, None if vref is None else vref[:, k0 - 1])
     m = first.t.size
 
     def padded(val):  # a history of the fine stage, NaN over the coarse one

@@ -28,9 +28,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import earth
-from .aligner import AlignmentResult, Site, Supports, check_azimuth_observable, check_not_accelerating
+from .aligner import AlignmentResult, Site, Supports, check_not_accelerating
+from .aligner_base import AlignerBase
 from .attitude import rotvec_to_dcm
-from .inputs import check_inputs
 from .imu import load_spec
 from .imudata import IMUData
 from .strapdown import body_increments
@@ -49,7 +49,7 @@ def triad(f_b, w_b):
     return np.stack([e, n, u], axis=-2)
 
 
-class CoarseAligner:
+class CoarseAligner(AlignerBase):
     """Analytic coarse alignment (method ``coarse``): TRIAD of the mean specific force and angular rate.
 
     Parameters
@@ -67,13 +67,11 @@ class CoarseAligner:
         self.history_points = int(history_points)
         self.spec = None if imu is None else load_spec(imu)
 
-    def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
+    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
         """Align every recording of ``imu`` (stationary base); ``vref`` and ``init`` are not used.
 
         Returns an :class:`AlignmentResult` whose last attitude uses the whole recording.
         """
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
         t, dth, dv = imu.increments()
         m = min(self.history_points, t.size)
         idx = np.unique(np.linspace(0, t.size - 1, m).round().astype(int))
@@ -198,7 +196,7 @@ def velocity_integral_inertial(t, t_start, vref, lat, h, chunk=20000):
     return Cv - Cv[:, :1] + integral, C_n_i0
 
 
-class InertialCoarseAligner:
+class InertialCoarseAligner(AlignerBase):
     """Inertial-frame coarse alignment (method ``coarse-i0``), robust to sway; in motion with a velocity reference.
 
     The gyros carry the body frame from its inertially frozen start b0: ``C_b^b0(t)`` (with the
@@ -292,7 +290,7 @@ class InertialCoarseAligner:
         """Largest ``fit_residual_mps`` (m/s) accepted without a reference on a record of ``duration`` s."""
         return np.inf if self.motion_mps is None else self.motion_mps + self.motion_mps_per_s2 * float(duration) ** 2
 
-    def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
+    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
         """Align every recording of ``imu``; ``init`` is not used.
 
         Parameters
@@ -306,17 +304,9 @@ class InertialCoarseAligner:
             swaying base, checked (see the class docstring): a ValueError naming the method and the
             figure when the data show a moving base.
         """
-        vref, init = check_inputs(imu, vref, init, self.name)
-        check_azimuth_observable(self.spec, site, self.name)
         who = self.name if self.caller is None else f"{self.caller} (coarse-i0 start)"
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
-        if vref is not None:
-            vref = np.asarray(vref, dtype=float)
-            if vref.shape != (R, N, 3):
-                raise ValueError(f"vref: expected shape ({R}, {N}, 3) (ENU m/s at the increment ends), found {vref.shape}")
-            if not np.all(np.isfinite(vref)):
-                raise ValueError("vref: expected finite velocities, found NaN or inf")
         keep = np.unique(np.linspace(0, N - 1, max(self.history_points, self.fit_points) * 4).round().astype(int))
         # with a reference: block 0 the anchor (first quarter), blocks 1..F tile the second half
         block = np.full(N, -1)

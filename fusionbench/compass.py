@@ -26,36 +26,9 @@ from . import earth
 from .attitude import euler_to_dcm
 from .strapdown import NavState, Strapdown
 
-#: Gyrocompasses lose the compass effect toward the poles (wN = OMEGA_IE cos L -> 0).
+#: Highest |latitude| of the gyrocompass-type aligners, deg (their ``max_latitude_deg``): they lose the compass
+#: effect toward the poles (wN = OMEGA_IE cos L -> 0).
 MAX_LATITUDE_DEG = 80.0
-
-
-def check_compass_latitude(lat, method):
-    """Raise ValueError (one line) when |lat| (rad) exceeds MAX_LATITUDE_DEG."""
-    if abs(np.degrees(lat)) > MAX_LATITUDE_DEG:
-        raise ValueError(f"latitude: {method} needs |latitude| <= {MAX_LATITUDE_DEG:g} deg (the horizontal earth "
-                         f"rate vanishes toward the poles), found {np.degrees(lat):.3f} deg")
-
-
-def azimuth_from_commands(w_cE, w_cN, alpha_x, alpha_y, lat, eps_E=0.0, eps_N=0.0):
-    """Azimuth error az (rad, in (-pi, pi]) from level commands, eq. (19).
-
-    Parameters
-    ----------
-    w_cE, w_cN : array_like
-        Steady commanded rates about east and north, rad/s.
-    alpha_x, alpha_y : array_like
-        Level error estimates (Euler platform angles about east and north), rad.
-    lat : float
-        Latitude, rad.
-    eps_E, eps_N : array_like, optional
-        Gyro bias estimates, rad/s (unknown in practice: 0).
-    """
-    wN = earth.OMEGA_IE * np.cos(lat)
-    wU = earth.OMEGA_IE * np.sin(lat)
-    s = (np.asarray(w_cE) + np.asarray(alpha_y) * wU - eps_E) / wN
-    c = 1.0 + (np.asarray(w_cN) - np.asarray(alpha_x) * wU - eps_N) / wN
-    return np.arctan2(s, c)
 
 
 class AzimuthFit:
@@ -70,28 +43,28 @@ class AzimuthFit:
 
     Eq. 19 reads sin(az) and cos(az) off the steady commands. Here the level angles in the coupling
     terms are replaced by the velocity equations (``g ay wU = wU (nabE - dvE' + ...)``), which turns
-    them into integrals of the measured velocity; and az(t) = az0 - A(t), where A is the azimuth
-    turned so far by the aligner itself (one-shot corrections, azimuth commands), known exactly.
-    With S = sin(az0), C = cos(az0), P and Q the double integrals of cos A and sin A, D_E and D_N
-    those of the commands and V the integrals of the velocity errors, the signals::
+    them into integrals of the measured velocity. With S = sin(az), C = cos(az), P = tau^2 / 2 the
+    double integral of 1 over the window, D_E and D_N the double integrals of the commands and V the
+    integrals of the velocity errors, the signals::
 
-        yN = dvN + 3 wU V_E - g D_E                  = c0N + c1N tau - gwN (S P - C Q) + bN tau^2
-        yE = dvE - 3 wU V_N + g D_N + g wN tau^2 / 2 = c0E + c1E tau + gwN (C P + S Q) + bE tau^2
+        yN = dvN + 3 wU V_E - g D_E                  = c0N + c1N tau - gwN S P + bN tau^2
+        yE = dvE - 3 wU V_N + g D_N + g wN tau^2 / 2 = c0E + c1E tau + gwN C P + bE tau^2
 
     are linear in [c0N, c1N, c0E, c1E, S, C] but for the bias terms b (gyro and accelerometer
     biases: -g epsE/2 + wU nabE/2, ...), which cannot be told apart from S and C on a stationary
     base and so stay in them: the azimuth limit -epsE / wN + tan L nabE / g. The least-squares
-    solution over the growing window gives az0 = atan2(S, C) from any heading, without waiting for
-    the loops to be steady, and keeps every sample's information across the aligner's own
-    corrections. Velocity corrections a loop applies itself (a classical damping term) must be added
-    back to the velocity it passes in (terms of order wU^2 are neglected).
+    solution over the growing window gives az = atan2(S, C) from any heading, without waiting for
+    the loops to be steady. The azimuth must not change during the fit: the aligners turn the loop's
+    attitude only after it (the PID's one-shot correction ends its fit; the ADRC turns only the
+    attitude it reports). Velocity corrections a loop applies itself (a classical damping term) must be
+    added back to the velocity it passes in (terms of order wU^2 are neglected).
 
     Parameters
     ----------
     runs : int
         Batch size.
-    h : float
-        Control period, s (one ``add`` per period).
+    step_s : float
+        Control step of the loop, s (one ``add`` per step).
     lat : float
         Latitude, rad.
     g : float
@@ -100,86 +73,69 @@ class AzimuthFit:
 
     _SCALE = 100.0  # time unit of the fit, s (keeps the normal equations well conditioned)
 
-    def __init__(self, runs, h, lat, g):
-        self.h, self.lat, self.g = float(h), float(lat), float(g)
+    def __init__(self, runs, step_s, lat, g):
+        self.step_s, self.lat, self.g = float(step_s), float(lat), float(g)
         self.wN = earth.OMEGA_IE * np.cos(lat)
         self.wU = earth.OMEGA_IE * np.sin(lat)
         self.R = runs
         self.n = 0
-        self.A = np.zeros(runs)            # azimuth turned by the aligner so far, rad
-        self.I = np.zeros((runs, 4))       # integrals of [w_cE, w_cN, cos A, sin A]
-        self.D = np.zeros((runs, 4))       # double integrals of the same
+        self.I = np.zeros((runs, 3))       # integrals of [w_cE, w_cN, 1]
+        self.D = np.zeros((runs, 3))       # double integrals of the same
         self.V = np.zeros((runs, 2))       # integrals of [dvE, dvN] (coupling and Coriolis terms)
         self._prev_dv = None
         self.t_sums = np.zeros(3)          # sums of tau^0, tau^1, tau^2
-        # per-run sums: P, tau P, Q, tau Q, P^2, Q^2, P Q, yN, tau yN, yE, tau yE, P yN, Q yN, P yE, Q yE
-        self.sums = np.zeros((runs, 15))
-
-    def turned(self, angle):
-        """Record that the aligner turned its attitude by ``angle`` (R,) rad about up, C <- Rz(angle) C
-        (an azimuth command w_cU over dt turns it by -w_cU dt)."""
-        self.A = self.A + angle
+        # per-run sums: P, tau P, P^2, yN, tau yN, yE, tau yE, P yN, P yE
+        self.sums = np.zeros((runs, 9))
 
     def add(self, dv_en, w_c_en):
-        """Add one period.
+        """Add one step.
 
         Parameters
         ----------
         dv_en : ndarray, shape (R, 2)
-            Velocity errors [dvE, dvN] at the end of the period, m/s.
+            Velocity errors [dvE, dvN] at the end of the step, m/s.
         w_c_en : ndarray, shape (R, 2)
-            Commands [w_cE, w_cN] applied during the period, rad/s.
+            Commands [w_cE, w_cN] applied during the step, rad/s.
         """
-        h = self.h
+        h = self.step_s
         if self.n:
-            rate = np.empty((self.R, 4))
+            rate = np.empty((self.R, 3))
             rate[:, :2] = w_c_en
-            rate[:, 2] = np.cos(self.A)
-            rate[:, 3] = np.sin(self.A)
+            rate[:, 2] = 1.0
             self.D += self.I * h + 0.5 * rate * h * h
             self.I += rate * h
             self.V += 0.5 * (self._prev_dv + dv_en) * h
         self._prev_dv = dv_en.copy()
         tau = self.n * h / self._SCALE
         g = self.g
-        P, Q = self.D[:, 2] / self._SCALE**2, self.D[:, 3] / self._SCALE**2
+        P = self.D[:, 2] / self._SCALE**2
         cross = 3.0 * self.wU * self.V  # level coupling (1x) and Coriolis (2x) terms, integrated
         yN = dv_en[:, 1] + cross[:, 0] - g * self.D[:, 0]
         yE = dv_en[:, 0] - cross[:, 1] + g * self.D[:, 1] + 0.5 * g * self.wN * (self.n * h) ** 2
         self.t_sums += (1.0, tau, tau * tau)
-        self.sums += np.stack([P, tau * P, Q, tau * Q, P * P, Q * Q, P * Q, yN, tau * yN, yE, tau * yE,
-                               P * yN, Q * yN, P * yE, Q * yE], axis=-1)
+        self.sums += np.stack([P, tau * P, P * P, yN, tau * yN, yE, tau * yE, P * yN, P * yE], axis=-1)
         self.n += 1
 
-    def initial_azimuth(self):
-        """az0 (R,) rad: the azimuth error at the window start, or NaN before 4 samples."""
+    def azimuth(self):
+        """The azimuth error az (R,) rad, in (-pi, pi], or NaN before 4 samples."""
         if self.n < 4:
             return np.full(self.R, np.nan)
         k = self.g * self.wN * self._SCALE**2
         s0, s1, s2 = self.t_sums
-        P, tP, Q, tQ, PP, QQ, PQ, yN, tyN, yE, tyE, PyN, QyN, PyE, QyE = np.moveaxis(self.sums, -1, 0)
-        # rows of xN = [1, tau, 0, 0, -k P, k Q] and xE = [0, 0, 1, tau, k Q, k P], summed products
+        P, tP, PP, yN, tyN, yE, tyE, PyN, PyE = np.moveaxis(self.sums, -1, 0)
+        # rows of xN = [1, tau, 0, 0, -k P, 0] and xE = [0, 0, 1, tau, 0, k P], summed products
         M = np.zeros((self.R, 6, 6))
         M[:, 0, 0] = M[:, 2, 2] = s0
         M[:, 0, 1] = M[:, 1, 0] = M[:, 2, 3] = M[:, 3, 2] = s1
         M[:, 1, 1] = M[:, 3, 3] = s2
         M[:, 0, 4] = M[:, 4, 0] = -k * P
-        M[:, 0, 5] = M[:, 5, 0] = k * Q
         M[:, 1, 4] = M[:, 4, 1] = -k * tP
-        M[:, 1, 5] = M[:, 5, 1] = k * tQ
-        M[:, 2, 4] = M[:, 4, 2] = k * Q
         M[:, 2, 5] = M[:, 5, 2] = k * P
-        M[:, 3, 4] = M[:, 4, 3] = k * tQ
         M[:, 3, 5] = M[:, 5, 3] = k * tP
-        M[:, 4, 4] = M[:, 5, 5] = k * k * (PP + QQ)
-        M[:, 4, 5] = M[:, 5, 4] = 0.0  # -k^2 P Q + k^2 Q P
-        b = np.stack([yN, tyN, yE, tyE, k * (QyE - PyN), k * (QyN + PyE)], axis=-1)
+        M[:, 4, 4] = M[:, 5, 5] = k * k * PP
+        b = np.stack([yN, tyN, yE, tyE, -k * PyN, k * PyE], axis=-1)
         theta = np.linalg.solve(M, b[..., None])[..., 0]
-        return np.arctan2(theta[:, 4], theta[:, 5])
-
-    def azimuth(self):
-        """The azimuth error now, az0 - A (R,) rad."""
-        return np.angle(np.exp(1j * (self.initial_azimuth() - self.A)))
+        return np.angle(np.exp(1j * np.arctan2(theta[:, 4], theta[:, 5])))
 
 
 def correct_azimuth(C_bn, alpha_z):
@@ -212,19 +168,8 @@ def level_guess(imu, seconds=1.0):
     return euler_to_dcm(np.stack([pitch, roll, np.zeros_like(pitch)], axis=-1))
 
 
-def start_loop(method, imu, site, vref, init, period):
-    """The checks every gyrocompass makes, then its :class:`CommandLoop`: latitude within
-    MAX_LATITUDE_DEG, at least ``method.min_duration_s`` of data, and the initial attitude ``init``
-    (R, 3, 3) or, when None, a levelled guess with yaw 0 (:func:`level_guess`)."""
-    check_compass_latitude(site.lat, method.name)
-    if imu.duration < method.min_duration_s:
-        raise ValueError(f"duration: {method.name} needs at least {method.min_duration_s:g} s, found {imu.duration:g} s")
-    C0 = None if init is None else np.broadcast_to(np.asarray(init, dtype=float), (imu.runs, 3, 3)).copy()
-    return CommandLoop(imu, site, level_guess(imu) if C0 is None else C0, period, vref)
-
-
 class CommandLoop:
-    """Strapdown on a stationary base, stepped one control period at a time with commanded rates.
+    """Strapdown on a stationary base, stepped one control step at a time with commanded rates.
 
     Parameters
     ----------
@@ -232,33 +177,33 @@ class CommandLoop:
         The recordings (R runs).
     site : Site
         Position (held fixed).
-    C0 : ndarray, shape (R, 3, 3)
-        Initial attitude.
-    period : float
-        Control period, s; rounded to a whole number of samples.
+    C0 : ndarray, shape (R, 3, 3), or None
+        Initial attitude; None: levelled from the first second of data with yaw 0 (:func:`level_guess`).
+    step_s : float
+        Control step, s; rounded to a whole number of samples (the attribute :attr:`step_s` is the rounded one).
     vref : ndarray, shape (R, M, 3), optional
         Reference velocity (ENU, m/s) at the end of each increment interval; zero if None. The
-        samples of each control period are averaged (the base is stationary, so this only filters
+        samples of each control step are averaged (the base is stationary, so this only filters
         the reference's noise).
 
-    Iterate over the loop: each step integrates one period with the current command and yields
+    Iterate over the loop: each step integrates ``m`` samples with the current command and yields
     ``(j, t, dv)``: step index, time (s) and velocity error (R, 3) m/s against the reference.
     Set :attr:`omega_c` (R, 3) rad/s before the next step; the attitude and velocity are in
     :attr:`sd` (``sd.state.C_bn``, ``sd.state.v_n``) and may be corrected between steps.
 
-    The periods cover ``steps * m`` samples; :meth:`finish` integrates the samples after the last whole
-    period (fewer than ``m``) with the command of the last period, so the loop's attitude reaches the last
+    The steps cover ``steps * m`` samples; :meth:`finish` integrates the samples after the last whole
+    step (fewer than ``m``) with the command of the last step, so the loop's attitude reaches the last
     sample (the time rule of :mod:`fusionbench.aligner`). ``records`` is the number of attitudes a history
-    with one entry per period and one for that tail holds.
+    with one entry per step and one for that tail holds.
     """
 
-    def __init__(self, imu, site, C0, period, vref=None):
+    def __init__(self, imu, site, C0, step_s, vref=None):
         self.t, dth, dv = imu.increments()
         self.R = dth.shape[0]
-        self.m = m = max(1, int(round(period / imu.dt)))
-        self.period = m * imu.dt
+        self.m = m = max(1, int(round(step_s / imu.dt)))
+        self.step_s = m * imu.dt
         self.steps = steps = self.t.size // m
-        # one contiguous block per control period: (steps, R, m, 3), so no step copies its slice
+        # one contiguous block per control step: (steps, R, m, 3), so no step copies its slice
         self.dth = np.ascontiguousarray(dth[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
         self.dv = np.ascontiguousarray(dv[:, :steps * m].reshape(self.R, steps, m, 3).swapaxes(0, 1))
         self._tail = (dth[:, steps * m:], dv[:, steps * m:])
@@ -267,7 +212,7 @@ class CommandLoop:
         if vref is not None:
             vref = np.asarray(vref, dtype=float)
             self.vref = vref[:, :steps * m].reshape(self.R, steps, m, 3).mean(axis=2).swapaxes(0, 1).copy()
-        state = NavState.broadcast(self.R, C0, lat=site.lat, lon=site.lon, h=site.h)
+        state = NavState.broadcast(self.R, level_guess(imu) if C0 is None else C0, lat=site.lat, lon=site.lon, h=site.h)
         self.sd = Strapdown(state, imu.dt, position_fixed=True)
         self.omega_c = np.zeros((self.R, 3))
 
@@ -276,17 +221,17 @@ class CommandLoop:
         for j in range(self.steps):
             self.sd.run(self.dth[j], self.dv[j], omega_cmd=self.omega_c, record_every=m)
             dv = self.sd.state.v_n
-            if self.vref is not None:  # the reference's samples of the period, averaged (static base)
+            if self.vref is not None:  # the reference's samples of the step, averaged (static base)
                 dv = dv - self.vref[j]
             yield j, self.t[(j + 1) * m - 1], dv
 
     def finish(self):
-        """Integrate the samples after the last whole period with the last command.
+        """Integrate the samples after the last whole step with the last command.
 
         Returns
         -------
         float or None
-            The time of the last sample, s, or None when the periods used every sample.
+            The time of the last sample, s, or None when the steps used every sample.
         """
         dth, dv = self._tail
         if dth.shape[1] == 0:

@@ -146,11 +146,14 @@ def schuler_period(lat=0.0, h=0.0):
     return 2.0 * np.pi / schuler_frequency(lat, h)
 
 
-def check_latitude(lat, name="latitude"):
-    """Raise ``ValueError`` naming ``name`` unless every latitude (rad) lies in [-pi/2, pi/2]."""
+def check_latitude(lat, name="latitude", limit_deg=90.0):
+    """Raise ``ValueError`` naming ``name`` unless every latitude (rad) is finite and within +-``limit_deg`` deg
+    (by default the whole range [-90, 90] deg; a method declares a smaller limit where its heading needs the
+    horizontal earth rate)."""
     lat = np.asarray(lat, dtype=float)
-    if not np.all(np.isfinite(lat)) or np.any(np.abs(lat) > np.pi / 2):
-        raise ValueError(
-            f"{name}: expected a latitude between -90 and 90 deg, found "
-            f"{np.degrees(lat).ravel()[:3].tolist()} deg"
-        )
+    limit = min(float(limit_deg), 90.0)
+    beyond = np.abs(lat) > np.pi / 2 if limit >= 90.0 else np.abs(np.degrees(lat)) > limit
+    if not np.all(np.isfinite(lat)) or np.any(beyond):
+        deg = np.degrees(lat).ravel()
+        found = f"{deg[0]:g}" if deg.size == 1 else f"{deg[:3].tolist()}"
+        raise ValueError(f"{name}: expected a latitude between -{limit:g} and {limit:g} deg, found {found} deg")

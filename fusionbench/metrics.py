@@ -135,16 +135,6 @@ def stats(x):
     }
 
 
-def rmse_window(t, x, t_from, t_to=None):
-    """RMS of ``x`` (..., M) over times ``t_from <= t <= t_to`` (s), along the last axis."""
-    t = np.asarray(t, dtype=float)
-    t_to = t[-1] if t_to is None else t_to
-    sel = (t >= t_from) & (t <= t_to)
-    if not np.any(sel):
-        raise ValueError(f"window: no sample between {t_from} s and {t_to} s")
-    return np.sqrt(np.mean(np.asarray(x)[..., sel] ** 2, axis=-1))
-
-
 # ------------------------------------------------------------------------------ attainable bound
 #: Floor of the per-step velocity-measurement standard deviation, m/s: an exact reference
 #: (``vref_sigma = 0``) is taken as this, far below what any accelerometer's white noise adds to

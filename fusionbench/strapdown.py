@@ -77,8 +77,11 @@ def rodrigues(rv):
     return _I3 + a[..., None, None] * K + b[..., None, None] * (K @ K)
 
 
-def body_increments(dtheta, dvel, dtheta_prev, dvel_prev):
-    """Coning- and sculling-compensated body increments for a chunk.
+def coning_sculling(dtheta, dvel, dtheta_prev, dvel_prev):
+    """Coning- and sculling-compensated increments for a chunk (the two-sample forms)::
+
+        phi  = dtheta + dtheta_prev x dtheta / 12
+        dv_b = dvel + dtheta x dvel / 2 + (dtheta_prev x dvel + dvel_prev x dtheta) / 12
 
     Parameters
     ----------
@@ -89,8 +92,8 @@ def body_increments(dtheta, dvel, dtheta_prev, dvel_prev):
 
     Returns
     -------
-    C_b : ndarray, shape (runs, n, 3, 3)
-        Body attitude increments exp([phi_b x]).
+    phi : ndarray, shape (runs, n, 3)
+        Rotation vector of each sample interval, rad, body frame.
     dv_b : ndarray, shape (runs, n, 3)
         Rotation- and sculling-compensated velocity increments, body frame at the interval start.
     """
@@ -98,6 +101,20 @@ def body_increments(dtheta, dvel, dtheta_prev, dvel_prev):
     dv_prev = np.concatenate([dvel_prev[:, None], dvel[:, :-1]], axis=1)
     phi = dtheta + _cross(th_prev, dtheta) / 12.0
     dv_b = dvel + 0.5 * _cross(dtheta, dvel) + (_cross(th_prev, dvel) + _cross(dv_prev, dtheta)) / 12.0
+    return phi, dv_b
+
+
+def body_increments(dtheta, dvel, dtheta_prev, dvel_prev):
+    """Coning- and sculling-compensated body increments for a chunk (:func:`coning_sculling`).
+
+    Returns
+    -------
+    C_b : ndarray, shape (runs, n, 3, 3)
+        Body attitude increments exp([phi_b x]).
+    dv_b : ndarray, shape (runs, n, 3)
+        Rotation- and sculling-compensated velocity increments, body frame at the interval start.
+    """
+    phi, dv_b = coning_sculling(dtheta, dvel, dtheta_prev, dvel_prev)
     return rodrigues(phi), dv_b
 
 

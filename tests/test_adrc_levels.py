@@ -35,7 +35,7 @@ def _phi(res, tr):
 
 def test_paper_parameters_are_the_printed_values():
     h = 0.02
-    printed = {"h": h, "c0": 1.0, "r0": 1 / h**2, "h0": h, "beta01": 1 / h, "beta02": 1 / (3 * h**2),
+    printed = {"step_s": h, "c0": 1.0, "r0": 1 / h**2, "h0": h, "beta01": 1 / h, "beta02": 1 / (3 * h**2),
                "beta03": 1 / (18**2 * h**3), "delta": 20000.0, "r1": 1 / h, "c1": 0.8, "h1": 10 * h}
     assert {k: PAPER_PARAMETERS[k] for k in printed} == pytest.approx(printed, rel=1e-15)
     m = ADRCGyrocompass(**PAPER_PARAMETERS)

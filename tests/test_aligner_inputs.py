@@ -1,5 +1,9 @@
-"""One input policy for every registered method: a velocity reference or initial attitude of the wrong shape,
-with NaN, or not a rotation is refused with one line naming the argument, before any work."""
+"""One input policy for every registered method (fusionbench.aligner_base.AlignerBase): samples with NaN, a velocity
+reference or initial attitude of the wrong shape, with NaN, or not a rotation, a latitude beyond the method's declared
+limit and a record shorter than its minimum are refused with one line naming the method and the field, before any
+work."""
+
+import re
 
 import numpy as np
 import pytest
@@ -43,3 +47,23 @@ def test_check_inputs_broadcasts_a_single_attitude_and_accepts_a_good_reference(
     assert check_inputs(IMU, GOOD_VREF[0])[0].shape == (2, IMU.samples, 3)  # one reference for every run
     rates = IMU.__class__(IMU.t, IMU.gyro / IMU.dt, IMU.accel / IMU.dt, kind="rate")
     assert check_inputs(rates, np.zeros((2, IMU.samples - 1, 3)))[0].shape == (2, IMU.samples - 1, 3)
+
+
+@pytest.mark.parametrize("method", sorted(available_methods()))
+def test_every_method_refuses_bad_samples_a_latitude_beyond_its_limit_and_a_short_record_alike(method):
+    m = load_method(method)
+    who = re.escape(m.name)
+    nan = IMU.__class__(IMU.t, IMU.gyro.copy(), IMU.accel)  # IMUData refuses NaN when built; an array changed
+    nan.gyro[:, 7] = np.nan  # afterwards still reaches the method, whose policy refuses it
+    with pytest.raises(ValueError, match=rf"^{who}: imu gyro: expected finite samples, found NaN or inf$"):
+        m.align(nan, SITE, init=np.eye(3))
+    lim = m.max_latitude_deg
+    if lim < 90.0:
+        with pytest.raises(ValueError, match=rf"^{who}: site latitude: expected a latitude between -{lim:g} and "
+                                             rf"{lim:g} deg, found {lim + 0.5:g} deg$"):
+            m.align(IMU, Site.from_degrees(lim + 0.5), init=np.eye(3))
+    k = max(2, min(IMU.samples, int(round(m.min_duration_s / IMU.dt)) - 1))  # a record shorter than the minimum
+    short = IMU.__class__(IMU.t[:k], IMU.gyro[:, :k], IMU.accel[:, :k])
+    with pytest.raises(ValueError, match=rf"^{who}: duration: expected at least {m.min_duration_s:g} s of data, "
+                                         rf"found {short.duration:g} s$"):
+        m.align(short, SITE, init=np.eye(3))

@@ -11,7 +11,7 @@ from damping import network as N
 from damping import qmap
 from damping.navigator import DampedNavigator, q_for_damping
 from fusionbench import earth, imu, metrics, trajectory, units
-from fusionbench.aligner import Site
+from fusionbench.aligner import Navigator, Site
 from fusionbench.imudata import IMUData
 
 
@@ -144,8 +144,10 @@ def test_chunked_navigation_equals_one_pass():
     traj, data, vref, init, site = _ship(0.05)
     nav = DampedNavigator("adaptive", damp_from_s=1800.0, accel_source="ins")
     whole = nav.align(data, site, init=init)
+    assert isinstance(nav, Navigator)  # navigate is the same navigation, the policy applied
+    np.testing.assert_array_equal(nav.navigate(data, site, init).C_bn, whole.C_bn)
     chunks = ((c, None) for c in imu.simulate_chunks(traj, imu.PRESETS["seed004"].noise_free(), 0.2, chunk_s=700.0))
-    parts = nav.navigate(chunks, site, init, dt=0.2)
+    parts = nav.navigate_chunks(chunks, site, init, dt=0.2)
     np.testing.assert_allclose(parts.C_bn, whole.C_bn, atol=1e-12)
     np.testing.assert_array_equal(parts.t, whole.t)
 

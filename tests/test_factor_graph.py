@@ -164,5 +164,5 @@ def test_absurd_inputs_are_refused_naming_the_field():
         fg.align(data, Site(LAT), vref=np.zeros((5, 3)))
     with pytest.raises(ValueError, match="init"):
         fg.align(data, Site(LAT), init=np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="keyframe_s"):
-        FactorGraphAligner(keyframe_s=0.0)
+    with pytest.raises(ValueError, match="step_s"):
+        FactorGraphAligner(step_s=0.0)

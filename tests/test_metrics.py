@@ -54,14 +54,9 @@ def test_settling_time_is_batched_and_takes_a_moving_limit():
     assert metrics.settling_time(t, x, 1.0, limit).tolist() == [4.0, 0.0]
 
 
-def test_stats_and_window_rms():
+def test_stats():
     s = metrics.stats([3.0, -4.0])
     assert s == {"mean": -0.5, "std": 3.5, "rms": pytest.approx(np.sqrt(12.5)), "max_abs": 4.0}
-    t = np.arange(10.0)
-    x = np.where(t >= 5, 2.0, 100.0)
-    assert metrics.rmse_window(t, x, 5.0) == pytest.approx(2.0)
-    with pytest.raises(ValueError, match="window"):
-        metrics.rmse_window(t, x, 50.0)
 
 
 def test_misalignment_history_shape_and_units():

@@ -314,7 +314,7 @@ def test_without_an_initial_attitude_it_starts_from_a_coarse_alignment_at_any_he
 def test_the_papers_printed_parameters_are_kept_as_printed():
     # section 4: T = 0.1 s; alpha = 1, delta = 2 h, beta11 = beta21 = 0.6, beta12 = beta22 = 0.08; TD h1 = 5 h,
     # r = 500; ESO at rest, fst TD, estimates read out only (no feedback)
-    assert PAPER_PARAMETERS == {"T": 0.1, "alpha1": 1.0, "alpha2": 1.0, "delta1": 0.2, "delta2": 0.2,
+    assert PAPER_PARAMETERS == {"step_s": 0.1, "alpha1": 1.0, "alpha2": 1.0, "delta1": 0.2, "delta2": 0.2,
                                 "beta11": 0.6, "beta12": 0.08, "beta21": 0.6, "beta22": 0.08, "eso_start": "rest",
                                 "td": "fst", "td_h1": 0.5, "td_r": 500.0, "feedback_from_s": None}
     a = ESOTDAligner(**PAPER_PARAMETERS)
