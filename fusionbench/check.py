@@ -90,7 +90,8 @@ def metrics_files(folder):
     folder = Path(folder)
     if (folder / "metrics.json").is_file():
         return [folder / "metrics.json"]
-    found = sorted(folder.glob("*/metrics.json"))
+    # a hidden folder is a report being assembled or set aside (fusionbench.reportdir), not a scenario's
+    found = sorted(p for p in folder.glob("*/metrics.json") if not p.parent.name.startswith("."))
     if not found:
         raise ValueError(f"{folder}: no metrics.json in it or in its sub-folders")
     return found

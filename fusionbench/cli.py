@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, attitude, progress, provenance, scenarios
+from . import __version__, attitude, progress, provenance, reportdir, scenarios
 from .aligner import (MAX_BIAS_TO_EARTH_RATE, Site, available_methods, check_time_rule, load_method, supports,
                       uses_noise_model)
 from .imu import load_spec
@@ -42,7 +42,11 @@ def _parser():
     r.add_argument("--runs", type=int, help="Monte Carlo runs (default: the scenario's)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--quick", action="store_true", help="reduced size for CI")
-    r.add_argument("--out", default="report", help="output folder (default ./report)")
+    r.add_argument("--out", default="report",
+                   help="output folder (default ./report): one scenario's report goes into it, 'all' puts one "
+                        "folder per scenario and the overview in it; a report folder is replaced whole when the "
+                        "new one is complete, and only if it is new, empty or a previous report (metrics.json, no "
+                        "sub-folder): any other folder is refused, nothing in it touched")
     r.add_argument("--jobs", type=int, default=-1,
                    help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
                         "process; the numbers do not depend on it")
@@ -119,7 +123,7 @@ def _cmd_align(args):
 
 
 def _cmd_run(args):
-    from .overview import write_overview, write_page
+    from .overview import write_overview
     from .experiment import write_scenario_report
     from .experiment import run_scenario
 
@@ -127,30 +131,41 @@ def _cmd_run(args):
     scns = [scenarios.get(n) for n in names]  # validate every scenario before running any
     methods = args.methods.split(",") if args.methods else None
     out_dir = Path(args.out)
+    if args.scenario == "all" and reportdir.is_report(out_dir):
+        raise ValueError(f"{out_dir}: expected a folder for the reports of 'all', found one scenario's report: give "
+                         f"--out another folder")
     outs = []
     # one bar for the whole command (scenarios x runs, elapsed and left) on a terminal; else a line per scenario
     total = sum(progress.expected_runs(scn, args.runs, args.quick) for scn in scns)
-    print(f"fusionbench run {args.scenario}: {len(scns)} scenario{'s' * (len(scns) > 1)}, {total} Monte Carlo runs"
-          f"{' (--quick size)' if args.quick else ''} into {out_dir}", flush=True)
-    pbar = progress.terminal_bar(total, "fusionbench run", disable=not sys.stderr.isatty())
-    start = time.perf_counter()
-    for scn in scns:
-        t0 = time.perf_counter()
-        pbar.set_postfix_str(scn.name)
-        res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick, n_jobs=args.jobs,
-                           progress=pbar)
-        wall = time.perf_counter() - t0
-        m = res.metrics
-        m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
-                                             duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
-                                             quick=args.quick, wall_s=wall)
-        folder = out_dir / scn.name if args.scenario == "all" else out_dir
-        path = write_scenario_report(res, folder)
-        write_page(path)
-        outs.append((scn, m, path))
-        pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
-        sys.stdout.flush()  # a log file gets the line when the scenario ends, not when the buffer fills
-    pbar.close()
+    pbar = None
+    # before any Monte Carlo: every report folder replaceable, its parent writable (created)
+    created = reportdir.prepare([out_dir / scn.name for scn in scns] if args.scenario == "all" else [out_dir])
+    try:
+        print(f"fusionbench run {args.scenario}: {len(scns)} scenario{'s' * (len(scns) > 1)}, {total} Monte Carlo "
+              f"runs{' (--quick size)' if args.quick else ''} into {out_dir}", flush=True)
+        pbar = progress.terminal_bar(total, "fusionbench run", disable=not sys.stderr.isatty())
+        start = time.perf_counter()
+        for scn in scns:
+            t0 = time.perf_counter()
+            pbar.set_postfix_str(scn.name)
+            res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick,
+                               n_jobs=args.jobs, progress=pbar)
+            wall = time.perf_counter() - t0
+            m = res.metrics
+            m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
+                                                 duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
+                                                 quick=args.quick, wall_s=wall)
+            folder = out_dir / scn.name if args.scenario == "all" else out_dir
+            path = write_scenario_report(res, folder)  # with report.html, whole or not at all
+            outs.append((scn, m, path))
+            pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
+            sys.stdout.flush()  # a log file gets the line when the scenario ends, not when the buffer fills
+    except BaseException:
+        reportdir.remove_empty(created)  # folders made for a report that never came
+        raise
+    finally:
+        if pbar is not None:
+            pbar.close()
     if args.scenario == "all":
         wall = time.perf_counter() - start
         print(f"overview: {write_overview(out_dir, outs, wall)} ({wall:.0f} s in all)")

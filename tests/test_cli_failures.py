@@ -1,0 +1,290 @@
+"""How the command line fails (docs/contract.md, command line): one line ``fusionbench: error: ...`` and exit 2 for
+bad input or a method that fails, ``fusionbench: interrupted`` and exit 130 on Ctrl-C, quiet exit 141 when the
+reader of its output goes away, no traceback unless asked for, and report folders that are whole or untouched.
+
+Through the public path: ``python -m fusionbench`` in a subprocess where the process matters (signals, pipes,
+the environment), ``fusionbench.cli.main`` in this process where it is only faster."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fusionbench import reportdir
+from fusionbench.check import packaged_reference
+from fusionbench.cli import main
+
+TINY = """name = "tiny-cli"
+description = "30 s static at 50 Hz, 2 runs"
+duration_s = 30.0
+rate_hz = 50.0
+runs = 2
+methods = ["coarse"]
+[site]
+lat_deg = 34.0
+[imu]
+preset = "navigation"
+"""
+
+#: Methods a user might write, each failing its own way (module ``fb_user_methods`` on the path).
+USER_METHODS = '''
+import os
+import time
+from pathlib import Path
+
+from fusionbench.coarse import CoarseAligner
+
+
+class InitRaises(CoarseAligner):
+    name = "init-raises"
+
+    def __init__(self, **options):
+        raise RuntimeError("no constructor today")
+
+
+class AlignRaises(CoarseAligner):
+    name = "align-raises"
+
+    def align(self, *args, **kwargs):
+        raise ZeroDivisionError("boom in align")
+
+
+class ReturnsNone(CoarseAligner):
+    name = "returns-none"
+
+    def align(self, *args, **kwargs):
+        return None
+
+
+NOT_A_CLASS = 42
+
+
+class InterruptsTheReport(CoarseAligner):
+    """Aligns like coarse; its own figure writes half a file, then Ctrl-C arrives."""
+    name = "interrupts-the-report"
+
+    def report_figures(self, folder):
+        (Path(folder) / "half.png").write_bytes(b"half a figure")
+        raise KeyboardInterrupt
+
+
+class Sleeps(CoarseAligner):
+    """Touches $FB_STARTED, then takes a minute: a long Monte Carlo to interrupt."""
+    name = "sleeps"
+
+    def align(self, *args, **kwargs):
+        Path(os.environ["FB_STARTED"]).touch()
+        time.sleep(60)
+        return super().align(*args, **kwargs)
+'''
+
+
+@pytest.fixture(scope="module")
+def user_path(tmp_path_factory):
+    """A folder on sys.path (and PYTHONPATH for subprocesses) with the user's methods and a broken module."""
+    folder = tmp_path_factory.mktemp("user")
+    (folder / "fb_user_methods.py").write_text(USER_METHODS)
+    (folder / "fb_user_broken.py").write_text("def align(:\n")
+    sys.path.insert(0, str(folder))
+    yield folder
+    sys.path.remove(str(folder))
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    p = tmp_path / "tiny.toml"
+    p.write_text(TINY)
+    return p
+
+
+def fb(capsys, *args):
+    """``fusionbench ARGS`` in this process: (exit status, stdout, stderr)."""
+    status = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def cli(*args, env=None, **kw):
+    return subprocess.run([sys.executable, "-m", "fusionbench", *map(str, args)], capture_output=True, text=True,
+                          env={**os.environ, **(env or {})}, timeout=120, **kw)
+
+
+def one_line(err, *words):
+    """stderr is one ``fusionbench: error:`` line holding every word, and no traceback."""
+    assert "Traceback" not in err
+    assert err.count("\n") == 1 and err.endswith("\n"), err
+    assert err.startswith("fusionbench: error: "), err
+    for word in words:
+        assert word in err, (word, err)
+
+
+def fake_report(folder, scenario="tiny-cli"):
+    """A previous run's report folder, with a file the new run does not write."""
+    folder.mkdir(parents=True)
+    (folder / "metrics.json").write_text(json.dumps({"scenario": scenario, "methods": {}, "old": True}))
+    (folder / "report.md").write_text("# the previous run\n")
+    (folder / "stale.png").write_bytes(b"from the previous run")
+    return snapshot(folder)
+
+
+def snapshot(folder):
+    """Every file and folder under ``folder`` and what the files hold."""
+    return {p.relative_to(folder).as_posix(): None if p.is_dir() else p.read_bytes()
+            for p in sorted(Path(folder).rglob("*"))}
+
+
+def hidden(folder):
+    """Temporary or set-aside folders left in ``folder`` (there should be none)."""
+    return [p.name for p in Path(folder).iterdir() if p.name.startswith(".")]
+
+
+# ---------------------------------------------------------------------------------------- bad values
+
+
+# ---------------------------------------------------------------------------------------- a user's method
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A 60-s stationary CSV recording at 50 Hz."""
+    from fusionbench import trajectory as tj
+    from fusionbench.imu import PRESETS, simulate
+    from fusionbench.imufiles import write_csv
+
+    tr = tj.Trajectory(0.6, 0.0, 0.0, tj.EulerSway(mean=(0.0, 0.0, 1.0)), duration=60.0)
+    data = simulate(tr, PRESETS["navigation"].noise_free(), 0.02)
+    return write_csv(tmp_path_factory.mktemp("rec") / "still.csv", data)
+
+
+# ---------------------------------------------------------------------------------------- pipes and Ctrl-C
+
+
+# ---------------------------------------------------------------------------------------- report folders
+
+
+def test_a_previous_report_is_replaced_whole(capsys, tmp_path, tiny):
+    out = tmp_path / "rep"
+    fake_report(out)
+    status, stdout, err = fb(capsys, "run", tiny, "--jobs", 1, "--out", out)
+    assert status == 0, err
+    assert {"metrics.json", "report.md", "report.html", "errors.png", "azimuth.png"} <= set(snapshot(out))
+    assert "stale.png" not in snapshot(out) and "old" not in json.loads((out / "metrics.json").read_text())
+    assert f"tiny-cli: {out / 'report.md'}" in stdout and hidden(tmp_path) == []
+
+
+def test_an_out_folder_that_is_not_a_report_is_refused_and_untouched(capsys, tmp_path, tiny):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("years of work")
+    (out / "data").mkdir()
+    (out / "data" / "metrics.json").write_text("{}")
+    before = snapshot(out)
+    status, stdout, err = fb(capsys, "run", tiny, "--jobs", 1, "--out", out)
+    assert status == 2 and stdout == ""
+    one_line(err, str(out), "previous fusionbench report", "--out")
+    assert snapshot(out) == before
+    # a previous report with a folder of the user's in it is not a report either
+    fake_report(tmp_path / "rep")
+    (tmp_path / "rep" / "notes").mkdir()
+    assert fb(capsys, "run", tiny, "--jobs", 1, "--out", tmp_path / "rep")[0] == 2
+    assert (tmp_path / "rep" / "notes").is_dir() and (tmp_path / "rep" / "stale.png").exists()
+
+
+def test_an_empty_out_folder_is_used(capsys, tmp_path, tiny):
+    (tmp_path / "empty").mkdir()
+    assert fb(capsys, "run", tiny, "--jobs", 1, "--out", tmp_path / "empty")[0] == 0
+    assert (tmp_path / "empty" / "metrics.json").is_file() and hidden(tmp_path) == []
+
+
+def test_an_unwritable_out_fails_at_once_before_any_work(capsys, tmp_path, tiny, monkeypatch):
+    import fusionbench.experiment
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("a Monte Carlo started")
+
+    monkeypatch.setattr(fusionbench.experiment, "run_scenario", no_work)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    for out in (blocker / "rep", blocker / "deeper" / "rep", blocker):
+        t0 = time.perf_counter()
+        status, stdout, err = fb(capsys, "run", tiny, "--out", out)
+        assert time.perf_counter() - t0 < 0.5
+        assert status == 2 and stdout == ""
+        one_line(err, str(out), "file")
+    assert blocker.read_text() == "not a folder" and sorted(p.name for p in tmp_path.iterdir()) == ["a-file",
+                                                                                                    "tiny.toml"]
+    status, _, err = fb(capsys, "run", "all", "--out", blocker)
+    assert status == 2
+    one_line(err, "a-file")
+
+
+def test_run_all_refuses_a_single_scenario_report_as_its_folder(capsys, tmp_path, monkeypatch):
+    import fusionbench.experiment
+
+    monkeypatch.setattr(fusionbench.experiment, "run_scenario", None)
+    before = fake_report(tmp_path / "rep")
+    status, _, err = fb(capsys, "run", "all", "--out", tmp_path / "rep")
+    assert status == 2
+    one_line(err, "one scenario's report")
+    assert snapshot(tmp_path / "rep") == before
+
+
+def test_a_failed_swap_puts_the_previous_report_back(tmp_path, monkeypatch):
+    target = tmp_path / "rep"
+    before = fake_report(target)
+    real_rename = os.rename
+
+    def rename(src, dst):
+        if Path(src).name.startswith(".rep.tmp-"):
+            raise KeyboardInterrupt  # between setting the old report aside and moving the new one in
+        return real_rename(src, dst)
+
+    monkeypatch.setattr(os, "rename", rename)
+    with pytest.raises(KeyboardInterrupt):
+        with reportdir.staged(target) as tmp:
+            (tmp / "metrics.json").write_text("{}")
+    assert snapshot(target) == before and hidden(tmp_path) == []
+
+
+def test_is_report_knows_a_report_from_other_folders(tmp_path):
+    fake_report(tmp_path / "rep")
+    assert reportdir.is_report(tmp_path / "rep")
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "metrics.json").write_text('{"other": "tool"}')
+    assert not reportdir.is_report(tmp_path / "x") and not reportdir.is_report(tmp_path / "absent")
+    assert not reportdir.is_report(tmp_path)  # it holds folders
+
+
+def test_the_current_folder_is_never_replaced(tmp_path, monkeypatch):
+    fake_report(tmp_path / "rep")
+    monkeypatch.chdir(tmp_path / "rep")
+    with pytest.raises(ValueError, match="current folder"):
+        reportdir.check_replaceable(".")
+
+
+# ---------------------------------------------------------------------------------------- check
+
+
+@pytest.fixture
+def run_and_ref(tmp_path):
+    """A run's folder and a reference, both the installed quick reference of static-34n."""
+    src = packaged_reference(True) / "static-34n.json"
+    (tmp_path / "run").mkdir()
+    shutil.copy(src, tmp_path / "run" / "metrics.json")
+    shutil.copy(src, tmp_path / "ref.json")
+    return tmp_path / "run", tmp_path / "ref.json"
+
+
+def test_check_ignores_a_folder_set_aside(tmp_path, run_and_ref):
+    from fusionbench.check import metrics_files
+
+    run, _ = run_and_ref
+    (tmp_path / "all").mkdir()
+    shutil.copytree(run, tmp_path / "all" / "static-34n")
+    shutil.copytree(run, tmp_path / "all" / ".static-34n.old-1-deadbeef")
+    assert metrics_files(tmp_path / "all") == [tmp_path / "all" / "static-34n" / "metrics.json"]
