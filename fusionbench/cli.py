@@ -173,12 +173,12 @@ def _cmd_run(args):
 
 
 def _cmd_check(args):
-    from .check import compare, format_table, load_json, metrics_files, packaged_reference, reference_for
+    from .check import compare, format_table, load_metrics, metrics_files, packaged_reference, reference_for
 
     failed = False
     pairs = []
     for path in metrics_files(args.dir):  # every pair first: a run of another size is one line, not N regressions
-        new = load_json(path, "metrics")
+        new = load_metrics(path, "metrics")
         ref, ref_path = reference_for(args.reference or packaged_reference(bool(new.get("quick"))), new["scenario"])
         if _size(ref) != _size(new):
             raise ValueError(f"{path}: the run is {_size_text(new)}, the reference {ref_path} is {_size_text(ref)}: "

@@ -280,6 +280,43 @@ def run_and_ref(tmp_path):
     return tmp_path / "run", tmp_path / "ref.json"
 
 
+@pytest.mark.parametrize("which", ["run", "ref"])
+@pytest.mark.parametrize("edit,words", [
+    (lambda m: m["methods"]["coarse"]["final_error_arcmin"]["U"].pop("rms"),
+     ["key 'methods.coarse.final_error_arcmin.U.rms'", "expected a number, found none"]),
+    (lambda m: m["methods"]["coarse"]["settling_time_s"].update(U="soon"),
+     ["key 'methods.coarse.settling_time_s.U'", "expected an object, found the string 'soon'"]),
+    (lambda m: m["methods"]["coarse"]["final_error_arcmin"]["E"].update(std=None),
+     ["key 'methods.coarse.final_error_arcmin.E.std'", "expected a number, found null"]),
+    (lambda m: m.update(methods=[]), ["key 'methods'", "expected an object, found a list"]),
+])
+def test_check_names_the_file_and_the_first_bad_key(capsys, run_and_ref, which, edit, words):
+    run, ref = run_and_ref
+    path = run / "metrics.json" if which == "run" else ref
+    m = json.loads(path.read_text())
+    edit(m)
+    path.write_text(json.dumps(m))
+    status, out, err = fb(capsys, "check", run, "--reference", ref)
+    assert status == 2 and out == ""
+    one_line(err, f"{path}: ", *words)
+
+
+def test_check_refuses_a_metrics_file_that_is_not_an_object(capsys, run_and_ref):
+    run, ref = run_and_ref
+    ref.write_text("[1, 2]")
+    status, _, err = fb(capsys, "check", run, "--reference", ref)
+    assert status == 2
+    one_line(err, str(ref), "expected a JSON object, found a list")
+    assert fb(capsys, "check", run, "--reference", run / "metrics.json")[0] == 0  # the unedited pair passes
+
+
+def test_every_installed_reference_has_the_shape_check_reads():
+    from fusionbench.check import load_metrics
+
+    for path in sorted(packaged_reference(True).parent.glob("*/*.json")):
+        load_metrics(path, "reference metrics")
+
+
 def test_check_ignores_a_folder_set_aside(tmp_path, run_and_ref):
     from fusionbench.check import metrics_files
 
