@@ -8,6 +8,7 @@ the environment), ``fusionbench.cli.main`` in this process where it is only fast
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -146,7 +147,37 @@ def hidden(folder):
 # ---------------------------------------------------------------------------------------- bad values
 
 
+@pytest.mark.parametrize("args,words", [
+    (["--jobs", "0"], ["--jobs", "non-zero worker count", "'0'"]),
+    (["--jobs", "two"], ["--jobs", "'two'"]),
+    (["--runs", "0"], ["--runs", "positive number of Monte Carlo runs", "'0'"]),
+    (["--runs", "1.5"], ["--runs", "'1.5'"]),
+    (["--seed", "-1"], ["--seed", "non-negative integer", "'-1'"]),
+    (["--seed", "x"], ["--seed", "'x'"]),
+])
+def test_bad_jobs_runs_and_seed_are_one_line(capsys, tmp_path, tiny, args, words):
+    status, out, err = fb(capsys, "run", tiny, "--out", tmp_path / "o", *args)
+    assert status == 2 and out == ""
+    one_line(err, *words)
+    assert not (tmp_path / "o").exists()
+
+
 # ---------------------------------------------------------------------------------------- a user's method
+
+
+@pytest.mark.parametrize("spec,words", [
+    ("fb_user_methods:InitRaises", ["RuntimeError", "no constructor today"]),
+    ("fb_user_methods:AlignRaises", ["align() raised ZeroDivisionError", "boom in align"]),
+    ("fb_user_methods:ReturnsNone", ["align() returned None", "expected an AlignmentResult"]),
+    ("fb_user_methods:NOT_A_CLASS", ["expected a class, found an int"]),
+    ("fb_user_broken:Aligner", ["SyntaxError", "fb_user_broken.py"]),
+    (":", ["expected a registered name or module:Class"]),
+    ("fb_user_methods:", ["expected a registered name or module:Class"]),
+])
+def test_align_names_a_failing_user_method_in_one_line(capsys, user_path, recording, spec, words):
+    status, out, err = fb(capsys, "align", recording, "--lat", 34, "--method", spec)
+    assert status == 2 and out == ""
+    one_line(err, f"method {spec!r}", *words)
 
 
 @pytest.fixture(scope="module")
@@ -161,7 +192,99 @@ def recording(tmp_path_factory):
     return write_csv(tmp_path_factory.mktemp("rec") / "still.csv", data)
 
 
+@pytest.mark.parametrize("spec,words", [
+    ("fb_user_methods:InitRaises", ["RuntimeError", "no constructor today"]),
+    ("fb_user_methods:AlignRaises", ["ZeroDivisionError", "boom in align"]),
+    ("fb_user_methods:NOT_A_CLASS", ["expected a class, found an int"]),
+    ("fb_user_broken:Aligner", ["SyntaxError"]),
+])
+def test_run_names_a_failing_user_method_and_writes_nothing(capsys, tmp_path, tiny, user_path, spec, words):
+    status, _, err = fb(capsys, "run", tiny, "--methods", f"coarse,{spec}", "--jobs", 1, "--out", tmp_path / "o")
+    assert status == 2
+    one_line(err, f"method {spec!r}", *words)
+    assert not (tmp_path / "o").exists() and hidden(tmp_path) == []
+
+
+def test_run_names_a_method_failing_in_a_worker(tmp_path, tiny, user_path):
+    r = cli("run", tiny, "--methods", "fb_user_methods:AlignRaises", "--jobs", 2, "--out", tmp_path / "o",
+            env={"PYTHONPATH": os.pathsep.join([str(user_path), os.environ.get("PYTHONPATH", "")])})
+    assert r.returncode == 2
+    one_line(r.stderr, "method 'fb_user_methods:AlignRaises'", "ZeroDivisionError", "boom in align")
+    assert not (tmp_path / "o").exists()
+
+
+def test_traceback_flag_and_variable_show_the_trace(capsys, tmp_path, tiny, user_path, monkeypatch):
+    args = ["run", tiny, "--methods", "fb_user_methods:InitRaises", "--out", tmp_path / "o"]
+    for argv in (["--traceback", *args], [*args, "--traceback"]):
+        status, _, err = fb(capsys, *argv)
+        assert status == 2 and err.startswith("Traceback") and "RuntimeError: no constructor today" in err
+    monkeypatch.setenv("FUSIONBENCH_TRACEBACK", "0")
+    one_line(fb(capsys, *args)[2], "no constructor today")
+    r = cli("align", tmp_path / "missing.csv", "--lat", 34, env={"FUSIONBENCH_TRACEBACK": "1"})
+    assert r.returncode == 2 and "Traceback" in r.stderr and "IMUFileError" in r.stderr
+    r = cli("align", tmp_path / "missing.csv", "--lat", 34)
+    assert r.returncode == 2
+    one_line(r.stderr, "missing.csv", "file not found")
+
+
 # ---------------------------------------------------------------------------------------- pipes and Ctrl-C
+
+
+def test_a_closed_pipe_is_quiet_and_exits_141():
+    p = subprocess.Popen([sys.executable, "-m", "fusionbench", "list"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()  # `fusionbench list | head -0`: the reader is gone before the first line
+    err = p.stderr.read()
+    assert p.wait(timeout=60) == 141 and err == b""
+    p.stderr.close()
+
+
+@pytest.mark.parametrize("target", ["the command, as workers start", "the process group, workers busy"])
+def test_ctrl_c_in_the_monte_carlo_stops_the_workers_and_keeps_the_old_report(tmp_path, tiny, user_path, target):
+    out = tmp_path / "rep"
+    before = fake_report(out)
+    started = tmp_path / "started"
+    env = {**os.environ, "FB_STARTED": str(started),
+           "PYTHONPATH": os.pathsep.join([str(user_path), os.environ.get("PYTHONPATH", "")])}
+    p = subprocess.Popen([sys.executable, "-m", "fusionbench", "run", tiny, "--methods", "fb_user_methods:Sleeps",
+                          "--jobs", "2", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env=env, start_new_session=True)
+    try:
+        assert "Monte Carlo runs" in p.stdout.readline()
+        if target.startswith("the command"):  # `kill -INT`, or a Ctrl-C while the workers are being made
+            time.sleep(0.5)
+            p.send_signal(signal.SIGINT)
+        else:  # Ctrl-C on a terminal: the whole foreground group, workers included, inside the method
+            deadline = time.monotonic() + 60
+            while not started.exists():
+                assert time.monotonic() < deadline and p.poll() is None, p.stderr.read()
+                time.sleep(0.05)
+            os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130 and err == "fusionbench: interrupted\n"
+    deadline = time.monotonic() + 10
+    while True:  # the workers stopped with it
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, "a worker outlived the interrupted run"
+        time.sleep(0.1)
+    assert snapshot(out) == before and hidden(tmp_path) == []
+
+
+@pytest.mark.parametrize("previous", [True, False])
+def test_ctrl_c_while_the_report_is_written_leaves_the_old_one_or_none(capsys, tmp_path, tiny, user_path, previous):
+    out = tmp_path / "rep"
+    before = fake_report(out) if previous else None
+    status, _, err = fb(capsys, "run", tiny, "--methods", "coarse,fb_user_methods:InterruptsTheReport",
+                        "--jobs", 1, "--out", out)
+    assert status == 130 and err == "fusionbench: interrupted\n"
+    assert (snapshot(out) == before) if previous else not out.exists()
+    assert hidden(tmp_path) == []
 
 
 # ---------------------------------------------------------------------------------------- report folders
