@@ -147,6 +147,8 @@ def check_time_rule(res: AlignmentResult, imu: IMUData, name: str | None = None)
     Checked: one attitude per recording, finite rotation matrices, strictly increasing times inside the
     data's span, and the last time at the last sample (to a millionth of a sample interval).
     """
+    if not isinstance(res, AlignmentResult):
+        raise ValueError(f"method {name!r}: align() returned {type(res).__name__}, expected an AlignmentResult")
     who = f"method {name or res.method!r}"
     t_last = float(imu.increments()[0][-1])
     if res.C_bn.shape[0] != imu.runs:
@@ -362,8 +364,9 @@ def entry_class(group: str, spec: str, what: str = "method"):
         mod, _, attr = spec.partition(":")
         try:
             return getattr(importlib.import_module(mod), attr)
-        except (ImportError, AttributeError) as exc:
-            raise ValueError(f"{what} {spec!r}: cannot import ({exc})") from None
+        except (ImportError, AttributeError, ValueError, SyntaxError) as exc:
+            raise ValueError(f"{what} {spec!r}: cannot import ({type(exc).__name__}: "
+                             f"{' '.join(str(exc).split())})") from None
     raise ValueError(f"{what} {spec!r}: expected one of {sorted(found)} or a module:Class path")
 
 
@@ -407,6 +410,8 @@ def load_method(spec: str, imu=None, vref_sigma=None, **options):
         One line naming the method and what is available.
     """
     cls = entry_class(GROUP, spec, "method")
+    if not isinstance(cls, type):
+        raise ValueError(f"method {spec!r}: expected a class, found {type(cls).__name__}")
     for key, value in (("imu", imu), ("vref_sigma", vref_sigma)):
         if value is not None and key not in options and takes_option(cls, key):
             options[key] = value

@@ -90,7 +90,8 @@ def metrics_files(folder):
     folder = Path(folder)
     if (folder / "metrics.json").is_file():
         return [folder / "metrics.json"]
-    found = sorted(folder.glob("*/metrics.json"))
+    # a hidden folder is a report being assembled or set aside (fusionbench.reportdir), not a scenario's
+    found = sorted(p for p in folder.glob("*/metrics.json") if not p.parent.name.startswith("."))
     if not found:
         raise ValueError(f"{folder}: no metrics.json in it or in its sub-folders")
     return found
@@ -106,6 +107,68 @@ def load_json(path, what):
         raise ValueError(f"{path}: {what} is not valid JSON ({exc})") from None
 
 
+def load_metrics(path, what):
+    """A metrics.json (a run's or a reference) checked for the keys :func:`compare` reads
+    (:func:`check_shape`)."""
+    metrics = load_json(path, what)
+    check_shape(metrics, path)
+    return metrics
+
+
+#: What :func:`compare` reads of each method of a metrics.json, (keys, required); the experiments' and the metric
+#: features' own rules read their optional figures with ``.get``.
+METHOD_KEYS = ([(("final_error_arcmin", ax, stat), True) for ax in "ENU" for stat in ("mean", "rms")]
+               + [(("final_error_arcmin", ax, "std"), False) for ax in "ENU"]
+               + [(("settling_time_s", "U", "mean"), True), (("settling_time_s", "U", "std"), False),
+                  (("settled_fraction_U",), False)])
+_MISSING = object()
+
+
+def _found(value):
+    if value is _MISSING:
+        return "none"
+    if value is None or isinstance(value, bool):
+        return json.dumps(value)
+    if isinstance(value, str):
+        return f"the string {value[:40]!r}"
+    if isinstance(value, (list, dict)):
+        return "a list" if isinstance(value, list) else "an object"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _expect(metrics, keys, kind, path, required=True):
+    """The value at ``keys`` if it is of ``kind`` ("a number", "a string", "an object"), else ValueError naming
+    ``path`` and the key; None when it is absent and not ``required``."""
+    value = metrics
+    for i, key in enumerate(keys):
+        if not isinstance(value, dict):
+            raise ValueError(f"{path}: key {'.'.join(keys[:i])!r}: expected an object, found {_found(value)}")
+        value = value.get(key, _MISSING)
+        if value is _MISSING:
+            break
+    if value is _MISSING and not required:
+        return None
+    ok = {"a number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+          "a string": lambda v: isinstance(v, str), "an object": lambda v: isinstance(v, dict)}[kind]
+    if not ok(value):
+        raise ValueError(f"{path}: key {'.'.join(keys)!r}: expected {kind}, found {_found(value)}")
+    return value
+
+
+def check_shape(metrics, path):
+    """Raise ValueError, one line naming ``path`` and the first key, unless ``metrics`` has what :func:`compare`
+    and ``fusionbench check`` read: ``scenario`` (a string), ``runs`` (a number, optional), ``methods`` (an
+    object) and for each method the :data:`METHOD_KEYS` (numbers)."""
+    if not isinstance(metrics, dict):
+        raise ValueError(f"{path}: expected a JSON object, found {_found(metrics)}")
+    _expect(metrics, ("scenario",), "a string", path)
+    _expect(metrics, ("runs",), "a number", path, required=False)
+    for name in _expect(metrics, ("methods",), "an object", path):
+        _expect(metrics, ("methods", name), "an object", path)
+        for keys, required in METHOD_KEYS:
+            _expect(metrics, ("methods", name, *keys), "a number", path, required)
+
+
 def reference_for(reference, scenario):
     """The reference file for ``scenario`` under ``reference`` (a folder of ``<scenario>.json`` or one file)."""
     reference = Path(reference)
@@ -114,7 +177,7 @@ def reference_for(reference, scenario):
         have = sorted(p.stem for p in reference.glob("*.json"))
         raise ValueError(f"{reference}: no reference for scenario {scenario!r} (it has {', '.join(have) or 'none'}); "
                          f"give one with --reference")
-    ref = load_json(path, "reference metrics")
+    ref = load_metrics(path, "reference metrics")
     if ref.get("scenario") != scenario:
         raise ValueError(f"{path}: reference is for scenario {ref.get('scenario')!r}, the run is {scenario!r}")
     return ref, path

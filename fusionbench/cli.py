@@ -1,6 +1,9 @@
 """Command line: ``fusionbench list / run / align / check`` (the contract: docs/contract.md).
 
-Bad input ends with one line ``fusionbench: error: ...`` naming the file or field, exit status 2.
+Bad input ends with one line ``fusionbench: error: ...`` naming the file or field, exit status 2; so does an
+error inside a method (naming it). Ctrl-C ends with ``fusionbench: interrupted``, exit status 130; a reader that
+stops reading (``fusionbench list | head -1``) ends it quietly with exit status 141. ``--traceback`` or
+``FUSIONBENCH_TRACEBACK=1`` shows the full trace instead of the line.
 """
 
 from __future__ import annotations
@@ -8,25 +11,59 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
+import os
+import re
 import sys
 import time
+import traceback
 from pathlib import Path
 
 import numpy as np
 
-from . import __version__, attitude, progress, provenance, scenarios
-from .aligner import (MAX_BIAS_TO_EARTH_RATE, Site, available_methods, check_time_rule, load_method, supports,
-                      uses_noise_model)
+from . import __version__, attitude, progress, provenance, reportdir, scenarios
+from .aligner import (GROUP, MAX_BIAS_TO_EARTH_RATE, AlignmentResult, Site, available_methods, check_time_rule,
+                      entry_class, load_method, supports, uses_noise_model)
 from .imu import load_spec
+
+#: Exit statuses: a check found a regression; bad input or a failed method; interrupted (128 + SIGINT); the
+#: reader of standard output went away (128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended).
+EXIT_REGRESSED, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 1, 2, 130, 141
+TRACEBACK_ENV = "FUSIONBENCH_TRACEBACK"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the contract's one error line (no usage block)."""
+
+    def error(self, message):
+        self.exit(EXIT_ERROR, f"fusionbench: error: {message} (see {self.prog} --help)\n")
+
+
+def _integer(expected, ok):
+    """An argparse type: an integer for which ``ok`` holds, else one line saying what was ``expected``."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not ok(value):
+            raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}")
+        return value
+    return parse
 
 
 def _parser():
-    p = argparse.ArgumentParser(prog="fusionbench", description="Benchmark of INS initial-alignment methods "
-                                "on a shared, exact IMU simulator.")
+    debug = _Parser(add_help=False)  # --traceback also after the command, without overriding one before it
+    debug.add_argument("--traceback", action="store_true", default=argparse.SUPPRESS,
+                       help=f"on an error show the full trace, not one line (or set {TRACEBACK_ENV}=1)")
+    p = _Parser(prog="fusionbench", description="Benchmark of INS initial-alignment methods "
+                "on a shared, exact IMU simulator.")
     p.add_argument("--version", action="version", version=f"fusionbench {__version__}")
+    p.add_argument("--traceback", action="store_true",
+                   help=f"on an error show the full trace, not one line (or set {TRACEBACK_ENV}=1)")
     sub = p.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="built-in scenarios and alignment methods, one per line")
-    a = sub.add_parser("align", help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
+    sub.add_parser("list", parents=[debug], help="built-in scenarios and alignment methods, one per line")
+    a = sub.add_parser("align", parents=[debug],
+                       help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
     a.add_argument("imu_file")
     a.add_argument("--lat", type=float, required=True, help="latitude, deg")
     a.add_argument("--lon", type=float, default=0.0, help="longitude, deg")
@@ -36,17 +73,24 @@ def _parser():
     a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
                    "(default: the method's own, shown by list)")
     a.add_argument("--json", action="store_true", help="print one JSON object")
-    r = sub.add_parser("run", help="Monte Carlo run of a scenario (a built-in name, 'all', or a .toml file)")
+    r = sub.add_parser("run", parents=[debug],
+                       help="Monte Carlo run of a scenario (a built-in name, 'all', or a .toml file)")
     r.add_argument("scenario")
     r.add_argument("--methods", help="comma-separated method names (default: the scenario's)")
-    r.add_argument("--runs", type=int, help="Monte Carlo runs (default: the scenario's)")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--runs", type=_integer("a positive number of Monte Carlo runs", lambda v: v >= 1),
+                   help="Monte Carlo runs (default: the scenario's)")
+    r.add_argument("--seed", type=_integer("a non-negative integer", lambda v: v >= 0), default=0)
     r.add_argument("--quick", action="store_true", help="reduced size for CI")
-    r.add_argument("--out", default="report", help="output folder (default ./report)")
-    r.add_argument("--jobs", type=int, default=-1,
+    r.add_argument("--out", default="report",
+                   help="output folder (default ./report): one scenario's report goes into it, 'all' puts one "
+                        "folder per scenario and the overview in it; a report folder is replaced whole when the "
+                        "new one is complete, and only if it is new, empty or a previous report (metrics.json, no "
+                        "sub-folder): any other folder is refused, nothing in it touched")
+    r.add_argument("--jobs", type=_integer("a non-zero worker count (-1: all cores)", lambda v: v != 0), default=-1,
                    help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
                         "process; the numbers do not depend on it")
-    c = sub.add_parser("check", help="compare DIR/metrics.json (or DIR/*/metrics.json) with reference metrics")
+    c = sub.add_parser("check", parents=[debug],
+                       help="compare DIR/metrics.json (or DIR/*/metrics.json) with reference metrics")
     c.add_argument("dir")
     c.add_argument("--reference", help="reference folder or file (default: the references installed with "
                    "fusionbench for the run's size, --quick or default, seed 0)")
@@ -63,7 +107,6 @@ def _cmd_list(args):
         print(f"  {name:<28} {getattr(cls, 'description', '')}{_method_notes(cls)}")
     from importlib.metadata import entry_points
 
-    from .aligner import GROUP
     from .experiment import all_experiments
 
     for exp_name, exp in all_experiments().items():  # methods of another kind, from the experiment that runs them
@@ -97,13 +140,16 @@ def _cmd_align(args):
     from .imufiles import IMUFileError, read_imu
 
     noise = None if args.imu is None else load_spec(args.imu)
-    method = load_method(args.method, imu=noise)
+    method = _named(args.method, lambda: load_method(args.method, imu=noise), group=GROUP)
     site = Site.from_degrees(args.lat, args.lon, args.height)
     imu, _ = read_imu(args.imu_file)
     if imu.duration < method.min_duration_s:
         raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
                            f"it needs at least {method.min_duration_s:g} s")
-    res = method.align(imu, site)
+    res = _named(args.method, lambda: method.align(imu, site), "align() ",
+                 also=(getattr(method, "name", ""),))
+    if not isinstance(res, AlignmentResult):
+        raise ValueError(f"method {args.method!r}: align() returned {_kind(res)}, expected an AlignmentResult")
     check_time_rule(res, imu, args.method)
     C = res.C_bn_final[0]
     pitch, roll, yaw = np.degrees(attitude.dcm_to_euler(C))
@@ -118,39 +164,98 @@ def _cmd_align(args):
     return 0
 
 
+def _named(spec, call, what="", also=(), group=None):
+    """``call()``, an error in it turned into one ValueError naming method ``spec`` and the exception (``what``:
+    the call, for the message); a ValueError that names ``spec`` or one of ``also`` (the method's own name: a
+    method refusing the data says who refuses) is left as it is. With ``group`` (its entry-point group) a
+    ``module:Class`` spec must name something callable."""
+    module, colon, cls = spec.partition(":")
+    if colon and not (module and cls):
+        raise ValueError(f"method {spec!r}: expected a registered name or module:Class, found {spec!r}")
+    try:
+        if colon and group:  # a module:Class path: something to instantiate
+            obj = entry_class(group, spec, "method")
+            if not callable(obj):
+                raise ValueError(f"method {spec!r}: expected a class, found {_kind(obj)}")
+        return call()
+    except ValueError as exc:
+        if any(name and name in str(exc) for name in (spec, *also)):
+            raise
+        raise ValueError(f"method {spec!r}: {_exception_text(exc)}") from exc
+    except Exception as exc:  # a user's module:Class raising, not a class, not importable (SyntaxError)
+        raise ValueError(f"method {spec!r}: {what}raised {_exception_text(exc)}") from exc
+
+
+def _kind(value):
+    name = type(value).__name__
+    return "None" if value is None else f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
+
+
+def _exception_text(exc):
+    """``Type: first line of the message`` (the message alone for a ValueError or an OSError)."""
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, (ValueError, OSError)) and msg:
+        return msg
+    return f"{type(exc).__name__}: {msg}" if msg else type(exc).__name__
+
+
+def _check_methods(scns, methods):
+    """Load each ``module:Class`` method named on the command line for every scenario before any work, so that
+    one that cannot be imported or built is one line naming it (the registered ones are the package's)."""
+    from .experiment import load_experiment
+
+    for scn in scns if methods else ():
+        loader, group = getattr(scn, "method", None), load_experiment(scn.experiment).method_group
+        for spec in methods:
+            if loader and ":" in spec and spec not in getattr(scn, "variants", {}):
+                _named(spec, lambda: loader(spec), group=group)
+
+
 def _cmd_run(args):
-    from .overview import write_overview, write_page
+    from .overview import write_overview
     from .experiment import write_scenario_report
     from .experiment import run_scenario
 
     names = scenarios.builtin_names() if args.scenario == "all" else [args.scenario]
     scns = [scenarios.get(n) for n in names]  # validate every scenario before running any
     methods = args.methods.split(",") if args.methods else None
+    _check_methods(scns, methods)
     out_dir = Path(args.out)
+    if args.scenario == "all" and reportdir.is_report(out_dir):
+        raise ValueError(f"{out_dir}: expected a folder for the reports of 'all', found one scenario's report: give "
+                         f"--out another folder")
     outs = []
     # one bar for the whole command (scenarios x runs, elapsed and left) on a terminal; else a line per scenario
     total = sum(progress.expected_runs(scn, args.runs, args.quick) for scn in scns)
-    print(f"fusionbench run {args.scenario}: {len(scns)} scenario{'s' * (len(scns) > 1)}, {total} Monte Carlo runs"
-          f"{' (--quick size)' if args.quick else ''} into {out_dir}", flush=True)
-    pbar = progress.terminal_bar(total, "fusionbench run", disable=not sys.stderr.isatty())
-    start = time.perf_counter()
-    for scn in scns:
-        t0 = time.perf_counter()
-        pbar.set_postfix_str(scn.name)
-        res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick, n_jobs=args.jobs,
-                           progress=pbar)
-        wall = time.perf_counter() - t0
-        m = res.metrics
-        m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
-                                             duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
-                                             quick=args.quick, wall_s=wall)
-        folder = out_dir / scn.name if args.scenario == "all" else out_dir
-        path = write_scenario_report(res, folder)
-        write_page(path)
-        outs.append((scn, m, path))
-        pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
-        sys.stdout.flush()  # a log file gets the line when the scenario ends, not when the buffer fills
-    pbar.close()
+    pbar = None
+    # before any Monte Carlo: every report folder replaceable, its parent writable (created)
+    created = reportdir.prepare([out_dir / scn.name for scn in scns] if args.scenario == "all" else [out_dir])
+    try:
+        print(f"fusionbench run {args.scenario}: {len(scns)} scenario{'s' * (len(scns) > 1)}, {total} Monte Carlo "
+              f"runs{' (--quick size)' if args.quick else ''} into {out_dir}", flush=True)
+        pbar = progress.terminal_bar(total, "fusionbench run", disable=not sys.stderr.isatty())
+        start = time.perf_counter()
+        for scn in scns:
+            t0 = time.perf_counter()
+            pbar.set_postfix_str(scn.name)
+            res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick,
+                               n_jobs=args.jobs, progress=pbar)
+            wall = time.perf_counter() - t0
+            m = res.metrics
+            m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
+                                                 duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
+                                                 quick=args.quick, wall_s=wall)
+            folder = out_dir / scn.name if args.scenario == "all" else out_dir
+            path = write_scenario_report(res, folder)  # with report.html, whole or not at all
+            outs.append((scn, m, path))
+            pbar.write(f"{scn.name}: {path} ({wall:.0f} s)", file=sys.stdout)
+            sys.stdout.flush()  # a log file gets the line when the scenario ends, not when the buffer fills
+    except BaseException:
+        reportdir.remove_empty(created)  # folders made for a report that never came
+        raise
+    finally:
+        if pbar is not None:
+            pbar.close()
     if args.scenario == "all":
         wall = time.perf_counter() - start
         print(f"overview: {write_overview(out_dir, outs, wall)} ({wall:.0f} s in all)")
@@ -158,12 +263,12 @@ def _cmd_run(args):
 
 
 def _cmd_check(args):
-    from .check import compare, format_table, load_json, metrics_files, packaged_reference, reference_for
+    from .check import compare, format_table, load_metrics, metrics_files, packaged_reference, reference_for
 
     failed = False
     pairs = []
     for path in metrics_files(args.dir):  # every pair first: a run of another size is one line, not N regressions
-        new = load_json(path, "metrics")
+        new = load_metrics(path, "metrics")
         ref, ref_path = reference_for(args.reference or packaged_reference(bool(new.get("quick"))), new["scenario"])
         if _size(ref) != _size(new):
             raise ValueError(f"{path}: the run is {_size_text(new)}, the reference {ref_path} is {_size_text(ref)}: "
@@ -177,7 +282,7 @@ def _cmd_check(args):
             print(format_table(bad))
         else:
             print(f"{new['scenario']}: ok against {ref_path}")
-    return 1 if failed else 0
+    return EXIT_REGRESSED if failed else 0
 
 
 def _size(m):
@@ -188,14 +293,77 @@ def _size_text(m):
     return f"{'--quick' if m.get('quick') else 'default'} size, {m.get('runs')} runs, seed {m.get('seed')}"
 
 
-def main(argv=None):
-    args = _parser().parse_args(argv)
+def _culprit(exc, specs):
+    """The ``module:Class`` method among ``specs`` whose module raised ``exc`` (in this process or, through
+    joblib's remote traceback, in a worker), or None."""
+    files = {}
+    for spec in specs:
+        module = sys.modules.get(spec.partition(":")[0]) if ":" in spec else None
+        if getattr(module, "__file__", None):
+            files[os.path.realpath(module.__file__)] = spec
+    if not files:
+        return None
+    frames = [f.filename for f in traceback.extract_tb(exc.__traceback__)]
+    cause = exc.__cause__
+    if cause is not None and type(cause).__name__ == "_RemoteTraceback":
+        frames += re.findall(r'File "([^"]+)", line', str(cause))
+    for filename in reversed(frames):
+        if os.path.realpath(filename) in files:
+            return files[os.path.realpath(filename)]
+    return None
+
+
+def _error_line(exc, args):
+    """The one line of an error: its message, naming the method it came from when that was a user's
+    ``module:Class``; an unexpected exception also gives its type and where to find more."""
+    text = _exception_text(exc)
+    who = _culprit(exc, [*(getattr(args, "methods", None) or "").split(","), getattr(args, "method", "")])
+    if who and repr(who) not in text:
+        return f"method {who!r}: {text}"
+    if isinstance(exc, (ValueError, OSError)) or who:
+        return text
+    return f"{text} (unexpected: --traceback shows where)"
+
+
+def _quiet_stdout():
+    """The reader of standard output went away: point it at devnull so that Python's last flush is quiet."""
     try:
-        return {"list": _cmd_list, "align": _cmd_align, "run": _cmd_run, "check": _cmd_check}[args.command](args)
-    except (ValueError, OSError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"fusionbench: error: {msg}", file=sys.stderr)
-        return 2
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def main(argv=None):
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); returns the exit status (0 done, 1 a check
+    found a regression, 2 an error, 130 interrupted, 141 standard output closed)."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as done:  # --help, --version, or a usage error (one line already printed)
+        return done.code if isinstance(done.code, int) else EXIT_ERROR
+    full = getattr(args, "traceback", False) or os.environ.get(TRACEBACK_ENV, "") not in ("", "0")
+    # joblib's resource tracker (a child process) warns about the semaphores of workers stopped by a Ctrl-C
+    # while it shuts down; that is joblib's housekeeping, not a message for the user
+    os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker")
+    commands = {"list": _cmd_list, "align": _cmd_align, "run": _cmd_run, "check": _cmd_check}
+    try:
+        status = commands[args.command](args)
+        sys.stdout.flush()  # a closed pipe shows here, not in Python's last flush at exit
+        return status
+    except KeyboardInterrupt:
+        if full:
+            traceback.print_exc()
+        print("fusionbench: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    except Exception as exc:
+        if full:
+            traceback.print_exc()
+        else:
+            print(f"fusionbench: error: {_error_line(exc, args)}", file=sys.stderr)
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":

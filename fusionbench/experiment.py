@@ -20,6 +20,8 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from . import reportdir
+
 GROUP = "fusionbench.experiments"
 
 
@@ -116,9 +118,15 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
 
 
 def write_scenario_report(out, folder):
-    """Write metrics.json, report.md and the figures of a run into ``folder`` (created), with the run's
-    experiment (:meth:`Experiment.write_report`); returns the report's path."""
+    """Write metrics.json, report.md, report.html and the figures of a run into ``folder`` with the run's
+    experiment (:meth:`Experiment.write_report`), all or nothing (:func:`fusionbench.reportdir.staged`): the
+    report is written into a temporary folder beside ``folder`` and replaces it whole when complete. ``folder``
+    must be absent, empty or a previous report (else ValueError, one line). Returns the report's path."""
+    from .overview import write_page  # the overview imports this module
+
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     exp = load_experiment(out.scenario.experiment, f"{out.scenario.name}: experiment")
-    return exp.write_report(out, folder)
+    with reportdir.staged(folder) as tmp:
+        report = Path(exp.write_report(out, tmp))
+        write_page(report)
+    return folder / report.relative_to(tmp)

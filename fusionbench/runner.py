@@ -139,6 +139,9 @@ def _align_batch(scn, name, sim, first_run, refusals):
         if not refusals:
             raise
         return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    except Exception as exc:  # not a refusal: a defect of the method, named in one line (the trace is chained)
+        raise ValueError(f"method {name!r}: align() raised {type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''}") from exc
     wall = time.perf_counter() - t0
     check_time_rule(res, data, name)
     truth_C = traj.truth(res.t).C_bn
