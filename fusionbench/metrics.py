@@ -272,32 +272,39 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
     T = duration / M
     t_end = T * np.arange(1, M + 1)
     tq = ((t_end - T / 2)[:, None] + T / 2 * _GL_X[None, :]).ravel()  # 4 points per step
-    w = _GL_W / 2  # weights of the step mean
+    Cq, fq, w_in, w_cor = _bound_kinematics(tq, M, site, trajectory, C_bn)
+    F, Qc, P0 = _bound_model(spec, tq, M, Cq, fq, w_in, w_cor, s0, _psd_factor)
+    Phi, L = _discretise(F, Qc, T)
+    r_sd = np.maximum(vs[:2] * np.sqrt(vref_dt / T), VREF_FLOOR)
+    return t_end, _square_root_filter(Phi, L, P0, r_sd, M)
 
-    # attitude, specific force and rates at the sub-points, shape (M, 4, ...)
+
+def _bound_kinematics(tq, M, site, trajectory, C_bn):
+    """Attitude (M, 4, 3, 3), specific force and the rates in the attitude and Coriolis terms (M, 4, 3), ENU, at
+    the 4 Gauss-Legendre points of each of the M steps: of a fixed ``site`` (attitude ``C_bn``) or of a
+    ``trajectory``'s truth."""
     if site is not None:
         C = np.eye(3) if C_bn is None else np.asarray(C_bn, dtype=float)
         if C.shape != (3, 3) or not np.all(np.isfinite(C)):
             raise _bound_error("C_bn", "a finite 3x3 attitude matrix", f"shape {C.shape}")
         w_ie = earth.earth_rate_n(site.lat)
-        f_n = -earth.gravity_n(site.lat, site.h)
-        Cq = np.broadcast_to(C, (M, 4, 3, 3))
-        fq = np.broadcast_to(f_n, (M, 4, 3))
-        w_in = np.broadcast_to(w_ie, (M, 4, 3))
-        w_cor = np.broadcast_to(2 * w_ie, (M, 4, 3))
-    else:
-        if C_bn is not None:
-            raise _bound_error("C_bn", "None with a trajectory (its truth gives the attitude)", "a matrix")
-        tr = trajectory.truth(tq)
-        _, f_b = trajectory.kinematics(tq)
-        Cq = tr.C_bn.reshape(M, 4, 3, 3)
-        fq = np.einsum("nij,nj->ni", tr.C_bn, f_b).reshape(M, 4, 3)
-        w_ie = earth.earth_rate_n(tr.lat)
-        w_en = earth.transport_rate_n(tr.v_n, tr.lat, tr.h)
-        w_in = (w_ie + w_en).reshape(M, 4, 3)
-        w_cor = (2 * w_ie + w_en).reshape(M, 4, 3)
+        return (np.broadcast_to(C, (M, 4, 3, 3)), np.broadcast_to(-earth.gravity_n(site.lat, site.h), (M, 4, 3)),
+                np.broadcast_to(w_ie, (M, 4, 3)), np.broadcast_to(2 * w_ie, (M, 4, 3)))
+    if C_bn is not None:
+        raise _bound_error("C_bn", "None with a trajectory (its truth gives the attitude)", "a matrix")
+    tr = trajectory.truth(tq)
+    _, f_b = trajectory.kinematics(tq)
+    w_ie = earth.earth_rate_n(tr.lat)
+    w_en = earth.transport_rate_n(tr.v_n, tr.lat, tr.h)
+    return (tr.C_bn.reshape(M, 4, 3, 3), np.einsum("nij,nj->ni", tr.C_bn, f_b).reshape(M, 4, 3),
+            (w_ie + w_en).reshape(M, 4, 3), (2 * w_ie + w_en).reshape(M, 4, 3))
 
-    # state layout: phi (0:3), dv (3:5), then the bias blocks the spec has
+
+def _bound_model(spec, tq, M, Cq, fq, w_in, w_cor, s0, psd_factor):
+    """The continuous error model over each step (step means of the 4 points): ``F`` and ``Qc`` (M, n, n) and the
+    initial variances ``P0`` (n,); states phi (0:3, rad), dv (3:5, m/s), then a bias block of 3 per bias kind
+    the spec has (a random constant with its walk; a Gauss-Markov instability), body frame."""
+    w = _GL_W / 2  # weights of the step mean
     g, a = spec.gyro, spec.accel
     blocks = []  # (sensor, initial std (3,), process-noise PSD (3,), decay rate 1/s)
     for sensor, e in (("gyro", g), ("accel", a)):
@@ -306,15 +313,14 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
         if any(e.instability):
             blocks.append((sensor, np.array(e.instability), 2 * np.square(e.instability) / e.tau, 1.0 / e.tau))
     n = 5 + 3 * len(blocks)
-
     Cm = np.einsum("q,mqij->mij", w, Cq)
     F = np.zeros((M, n, n))
     F[:, 0:3, 0:3] = -attitude.skew(np.einsum("q,mqi->mi", w, w_in))
     F[:, 3:5, 0:3] = attitude.skew(np.einsum("q,mqi->mi", w, fq))[:, :2]
     F[:, 3:5, 3:5] = -attitude.skew(np.einsum("q,mqi->mi", w, w_cor))[:, :2, :2]
     Qc = np.zeros((M, n, n))
-    qg = np.einsum("q,mq->m", w, _psd_factor(tq, spec.schedules, "gyro").reshape(M, 4))
-    qa = np.einsum("q,mq->m", w, _psd_factor(tq, spec.schedules, "accel").reshape(M, 4))
+    qg = np.einsum("q,mq->m", w, psd_factor(tq, spec.schedules, "gyro").reshape(M, 4))
+    qa = np.einsum("q,mq->m", w, psd_factor(tq, spec.schedules, "accel").reshape(M, 4))
     Qc[:, 0:3, 0:3] = qg[:, None, None] * np.einsum("q,mqij,j,mqkj->mik", w, Cq, np.square(g.white), Cq)
     Qc[:, 3:5, 3:5] = qa[:, None, None] * np.einsum("q,mqij,j,mqkj->mik", w, Cq, np.square(a.white), Cq)[:, :2, :2]
     P0 = np.zeros(n)
@@ -328,9 +334,15 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
         F[:, k:k + 3, k:k + 3] = -decay * np.eye(3)
         Qc[:, k:k + 3, k:k + 3] = np.diag(q)
         P0[k:k + 3] = np.square(sig0)
+    return F, Qc, P0
 
+
+def _discretise(F, Qc, T):
+    """Transition ``Phi`` and a square root ``L`` of the process noise ``Qd = L L^T`` over a step of ``T`` s (Van
+    Loan); one discretisation when every step has the same model (a static base)."""
+    n = F.shape[1]
     if np.all(F == F[0]) and np.all(Qc == Qc[0]):
-        F, Qc = F[:1], Qc[:1]  # static: one discretisation serves every step
+        F, Qc = F[:1], Qc[:1]
     # Van Loan: expm([[-F, Qc], [0, F^T]] T) = [[., Phi^-1 Qd], [0, Phi^T]]
     A = np.zeros((F.shape[0], 2 * n, 2 * n))
     A[:, :n, :n] = -F * T
@@ -345,8 +357,13 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
     dq = np.sqrt(np.diagonal(Qd, axis1=1, axis2=2))
     dq = np.where(dq > 0, dq, 1.0)
     lam, V = np.linalg.eigh(Qd / (dq[:, :, None] * dq[:, None, :]))
-    L = dq[:, :, None] * V * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]
-    r_sd = np.maximum(vs[:2] * np.sqrt(vref_dt / T), VREF_FLOOR)
+    return Phi, dq[:, :, None] * V * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]
+
+
+def _square_root_filter(Phi, L, P0, r_sd, M):
+    """The attitude sigmas (M, 3) rad of a square-root Kalman filter over M steps, measuring dvE, dvN with noise
+    std ``r_sd`` (2,) m/s at each step."""
+    n = P0.size
     S = np.diag(np.sqrt(P0))  # P = S S^T
     pre = np.zeros((n + 2, n + 2))
     pre[0, 0], pre[1, 1] = r_sd
@@ -360,4 +377,4 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
         pre[2:, 2:] = S.T
         S = np.linalg.qr(pre, mode="r")[2:, 2:].T
         sigma[j] = np.sqrt(np.sum(S[:3] ** 2, axis=1))
-    return t_end, sigma
+    return sigma
