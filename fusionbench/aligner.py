@@ -57,14 +57,19 @@ class Site:
 
     def __post_init__(self):
         earth.check_latitude(self.lat, "site latitude")
+        if not np.isfinite(self.lon) or abs(self.lon) > 2 * np.pi:
+            raise ValueError(f"site longitude: expected a longitude between -360 and 360 deg, found "
+                             f"{np.degrees(self.lon):g} deg")
         if not np.isfinite(self.h) or abs(self.h) > 1e5:
             raise ValueError(f"site height: expected a height between -100 and 100 km in m, found {self.h}")
 
     @classmethod
     def from_degrees(cls, lat_deg, lon_deg=0.0, h=0.0):
         """Site from latitude and longitude in degrees and height in m."""
-        if not -90.0 <= float(lat_deg) <= 90.0:
+        if not -90.0 <= float(lat_deg) <= 90.0:  # NaN fails this too
             raise ValueError(f"latitude: expected degrees between -90 and 90, found {lat_deg}")
+        if not -360.0 <= float(lon_deg) <= 360.0:
+            raise ValueError(f"longitude: expected degrees between -360 and 360, found {lon_deg}")
         return cls(np.radians(float(lat_deg)), np.radians(float(lon_deg)), float(h))
 
     @property

@@ -62,6 +62,9 @@ class CoarseAligner(AlignerBase):
     supports = Supports(bases=("static",), max_abs_lat_deg=80.0)  # the mean rate carries a sway's net rotation
     description = "analytic coarse alignment (double-vector/TRIAD of mean specific force and earth rate)"
     min_duration_s = 1.0
+    #: Beyond it the horizontal earth rate (cos L of it) is too small to point north: at 90 deg there is none, and
+    #: the heading would be whatever the sensor errors make it.
+    max_latitude_deg = 89.0
 
     def __init__(self, history_points: int = 200, imu=None):
         self.history_points = int(history_points)
@@ -272,6 +275,7 @@ class InertialCoarseAligner(AlignerBase):
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)
     description = "inertial-frame coarse alignment (gravity turning with the earth), robust to sway; in motion with vref"
     min_duration_s = 10.0
+    max_latitude_deg = 89.0  # as the analytic coarse alignment: no north at the pole
 
     def __init__(self, history_points: int = 100, fit_points: int = 50, motion_mps: float | None = 0.15,
                  motion_mps_per_s2: float = 6e-6, max_gravity_excess: float = 3e-3, caller: str | None = None,

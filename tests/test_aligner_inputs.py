@@ -67,3 +67,10 @@ def test_every_method_refuses_bad_samples_a_latitude_beyond_its_limit_and_a_shor
     with pytest.raises(ValueError, match=rf"^{who}: duration: expected at least {m.min_duration_s:g} s of data, "
                                          rf"found {short.duration:g} s$"):
         m.align(short, SITE, init=np.eye(3))
+
+
+@pytest.mark.parametrize("lat, lon, words", [(34.0, float("nan"), "longitude"), (34.0, 1e9, "longitude"),
+                                             (float("nan"), 0.0, "latitude"), (90.5, 0.0, "latitude")])
+def test_a_site_names_a_bad_coordinate(lat, lon, words):
+    with pytest.raises(ValueError, match=words):
+        Site.from_degrees(lat, lon)
