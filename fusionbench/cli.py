@@ -38,6 +38,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_ERROR, f"fusionbench: error: {message} (see {self.prog} --help)\n")
 
 
+#: How far the mean specific force of a record given to ``align`` may be from the site's gravity (relative): a
+#: moored ship's sway changes it by far less, a unit error (g for m/s^2) or an accelerating vehicle by far more.
+GRAVITY_TOLERANCE = 0.05
+
 def _integer(expected, ok):
     """An argparse type: an integer for which ``ok`` holds, else one line saying what was ``expected``."""
     def parse(text):
@@ -146,6 +150,11 @@ def _cmd_align(args):
     if imu.duration < method.min_duration_s:
         raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
                            f"it needs at least {method.min_duration_s:g} s")
+    f_mean = float(np.linalg.norm(imu.mean_rates()[1][0]))
+    if abs(f_mean - site.g) > GRAVITY_TOLERANCE * site.g:  # align takes a stationary or swaying record
+        raise IMUFileError(f"{args.imu_file}: expected a stationary or swaying record, whose mean specific force is "
+                           f"gravity ({site.g:.4f} m/s^2 at the site, within {100 * GRAVITY_TOLERANCE:g} %), found "
+                           f"{f_mean:.4g} m/s^2 (accelerometers in other units, or a moving base?)")
     res = _named(args.method, lambda: method.align(imu, site), "align() ",
                  also=(getattr(method, "name", ""),))
     if not isinstance(res, AlignmentResult):
@@ -156,7 +165,7 @@ def _cmd_align(args):
     out = {"method": method.name, "t_end": res.t_end, "C_bn": C.tolist(), "pitch_deg": float(pitch),
            "roll_deg": float(roll), "yaw_deg": float(yaw), "heading_deg": float(np.degrees(attitude.heading(np.radians(yaw))))}
     if args.json:
-        print(json.dumps(out))
+        print(json.dumps(out, allow_nan=False))
     else:
         model = res.imu_model
         print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))

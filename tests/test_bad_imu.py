@@ -110,3 +110,16 @@ def test_a_trajectory_names_a_bad_argument(kwargs, words):
     with pytest.raises(ValueError) as exc:
         tj.Trajectory(**{"lat": 0.6, "lon": 0.0, "h": 0.0, **kwargs})
     _one_line(exc, *words)
+
+
+@pytest.mark.parametrize("accel, words", [(0.0, "found 0 m/s^2"), (1.0, "found 1 m/s^2")])
+def test_align_refuses_a_record_whose_specific_force_is_not_gravity(tmp_path, capsys, accel, words):
+    # all-zero accelerometers (a dead channel) or specific force in g: no attitude, one line, exit 2
+    from fusionbench.cli import main
+
+    p = tmp_path / "g.csv"
+    rows = [f"{t:.2f},1e-5,4e-5,3e-5,0,0,{accel}" for t in T]
+    p.write_text("t,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n")
+    assert main(["align", str(p), "--lat", "34", "--json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(p) in err and "mean specific force" in err and words in err, err
