@@ -41,3 +41,26 @@ class AlignmentExperiment:
 
     def check(self, new, ref):
         return []  # the common rules of fusionbench.check and the metric features' rules cover its figures
+
+
+class NavigationExperiment(AlignmentExperiment):
+    """Free-inertial navigation (``experiment = "navigation"``): the same Monte Carlo, its methods navigators
+    (:class:`fusionbench.aligner.Navigator`, e.g. ``damped-nav``) started from the scenario's initial attitude,
+    scored against the truth over hours (kind ``navigation``: no stationary limit, no settling band)."""
+
+    name = "navigation"
+    kind = "navigation"
+
+    def load(self, data, src):
+        scn = scenarios.parse(data, src)
+        if scn.init_misalignment is None:
+            raise scenarios.ScenarioError(f"{src}: field 'init.misalignment_deg': expected the initial attitude error a "
+                                          f"navigator starts from, found none")
+        return scn
+
+    def load_method(self, scn, spec, **options):
+        method = super().load_method(scn, spec, **options)
+        if not isinstance(method, aligner.Navigator):
+            raise ValueError(f"method {spec!r}: expected a navigator (navigate(imu, site, init)), found an aligner")
+        return method
+

@@ -63,3 +63,16 @@ def test_a_binary_file_is_one_line_naming_it(tmp_path):
     with pytest.raises(scenarios.ScenarioError) as exc:
         scenarios.load(path)
     assert str(path) in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_a_navigation_scenario_needs_an_initial_attitude_and_navigators(tmp_path):
+    path = tmp_path / "nav.toml"
+    path.write_text('experiment = "navigation"\n' + BASE)
+    with pytest.raises(scenarios.ScenarioError, match=r"nav.toml: field 'init.misalignment_deg': expected the initial"):
+        scenarios.load(path)
+    path.write_text('experiment = "navigation"\n' + BASE.replace('["coarse"]', '["damped-nav"]')
+                    + "[init]\nmisalignment_deg = [0.05, 0.05, 0.1]\n")
+    scn = scenarios.load(path)
+    assert scn.kind == "navigation" and scn.method("damped-nav").name == "damped-nav"
+    with pytest.raises(ValueError, match="method 'coarse': expected a navigator"):
+        scn.method("coarse")
