@@ -234,6 +234,8 @@ class ADRCGyrocompass(AlignerBase):
         rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
     """
 
+    positive_options = ("step_s", "h1", "c0", "c1", "delta", "eso_bandwidth", "shot_s")
+
     name = "adrc"
     description = ("ADRC gyrocompass (seed 000): ESO/NLSEF level loops with the level read off the ESO, azimuth "
                    "from the steady commands (eq. 19, least squares)")

@@ -667,6 +667,8 @@ class ESOTDAligner(AlignerBase):
         td="ls", ``td_start_s + td_min_s`` (the first azimuth; it keeps improving). Also ``min_duration_s``.
     """
 
+    positive_options = ("step_s", "td_r", "force_h1", "feedback_every_s")
+
     name = "eso-td"
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.7 arcmin from the limit (conformance)
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05)

@@ -323,6 +323,8 @@ class FactorGraphAligner(AlignerBase):
         inseparable heading and bias share it.
     """
 
+    positive_options = ("step_s", "position_sigma", "integration_sigma", "max_iterations", "max_passes", "huber_k")
+
     name = "gtsam"
     description = ("factor-graph fine alignment (gtsam ImuFactors, earth-rate Coriolis, every reference sample against "
                    "the IMU's velocity at its time, bias priors from the IMU model)")

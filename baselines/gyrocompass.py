@@ -164,6 +164,8 @@ class PIDGyrocompass(AlignerBase):
         rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
     """
 
+    positive_options = ("step_s", "shot_s", "level_td_s")
+
     name = "pid"
     # up to 70 deg: at 75 deg under seed 000's sway with a 0.05 m/s reference its azimuth ends 6 bounds off;
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.9 arcmin from the limit (conformance)

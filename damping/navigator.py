@@ -102,6 +102,8 @@ class DampedNavigator(AlignerBase):
         A map saved with :meth:`damping.qmap.QMap.save` to use instead of the default fit.
     """
 
+    positive_options = ("step_s", "accel_tau_s", "max_error_deg")
+
     name = "damped-nav"
     supports = Supports(bases=(), needs_init=True)  # a navigator: it needs an initial attitude from an alignment
     description = "free-inertial navigation with seed 004's damping network (undamped, fixed xi = 0.5, or adaptive q)"

@@ -21,9 +21,23 @@ expected and what was found: ``"kf: site latitude: expected a latitude between -
 
 What only a method can judge (a step the data's sample interval cannot carry, a base that moves without a
 reference) it checks in ``_align``, with messages of the same form.
+
+Options are checked when the method is built, from the constructor's own defaults (:func:`check_option`): an
+option whose default is a number must be a finite number of that kind (a whole number where the default is
+one; None where its annotation allows it), not negative where the default is positive, and positive where
+the class lists it in
+:attr:`AlignerBase.positive_options` (step sizes, gains, windows: 0 makes no method); a flag must be true or
+false. A refusal is one ``ValueError`` naming the method and the option (``"adrc: option h1: expected a
+positive number, found -4"``); a scenario's variant adds its ``variants.NAME``.
 """
 
 from __future__ import annotations
+
+import functools
+import inspect
+import numbers
+
+import numpy as np
 
 from . import earth
 from .aligner import AlignmentResult, Site, check_azimuth_observable, supports
@@ -52,6 +66,31 @@ class AlignerBase:
     min_duration_s: float = 0.0
     max_latitude_deg: float = 90.0
     spec = None
+    #: Options that must be positive (besides being of their default's kind): the update interval at least.
+    positive_options: tuple = ("step_s",)
+
+    def __init_subclass__(cls, **kwargs):
+        """Check the options given to a subclass's constructor (:func:`check_option`) before it runs."""
+        super().__init_subclass__(**kwargs)
+        init = cls.__dict__.get("__init__")
+        if init is None:
+            return
+        sig = inspect.signature(init)
+
+        @functools.wraps(init)
+        def checked(self, *args, **kw):
+            given = sig.bind_partial(self, *args, **kw).arguments
+            for name, value in list(given.items())[1:]:
+                param = sig.parameters[name]
+                if param.kind in (param.VAR_KEYWORD, param.VAR_POSITIONAL):
+                    continue
+                if value is None and "None" in str(param.annotation):  # an option the method may switch off
+                    continue
+                check_option(getattr(type(self), "name", type(self).__name__), name, value, param.default,
+                             name in type(self).positive_options)
+            init(self, *args, **kw)
+
+        cls.__init__ = checked
 
     def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
         """Apply the input policy (module docstring), then align (:meth:`_align`); arguments as
@@ -85,3 +124,23 @@ class AlignerBase:
             Initial attitude C_bn, rotation matrices.
         """
         raise NotImplementedError(f"{type(self).__name__}: implement _align(imu, site, vref, init)")
+
+
+def check_option(method, name, value, default, positive=False):
+    """One option against its default (module docstring): ValueError ``"<method>: option <name>: expected ...,
+    found ..."``; an option whose default is None, a string or a table is left to the method."""
+    if isinstance(default, bool):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{method}: option {name}: expected true or false, found {value!r}")
+        return
+    if not isinstance(default, numbers.Real) or default is inspect.Parameter.empty:
+        return
+    whole = isinstance(default, numbers.Integral)
+    base = "whole number" if whole else "number"
+    kind = f"a positive {base}" if positive else f"a {base} >= 0" if default > 0 else f"a {base}"
+    ok = (isinstance(value, numbers.Integral) if whole else isinstance(value, numbers.Real)) \
+        and not isinstance(value, (bool, np.bool_)) and bool(np.isfinite(value))
+    ok = ok and (value > 0 if positive else value >= 0 if default > 0 else True)
+    if not ok:
+        raise ValueError(f"{method}: option {name}: expected {kind}, found {value!r}")
+

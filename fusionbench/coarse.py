@@ -58,6 +58,8 @@ class CoarseAligner(AlignerBase):
         Number of times at which the growing-window estimate is reported.
     """
 
+    positive_options = ("history_points",)
+
     name = "coarse"
     supports = Supports(bases=("static",), max_abs_lat_deg=80.0)  # the mean rate carries a sway's net rotation
     description = "analytic coarse alignment (double-vector/TRIAD of mean specific force and earth rate)"
@@ -270,6 +272,8 @@ class InertialCoarseAligner(AlignerBase):
     imu : str, path or IMUSpec, optional
         The IMU, used only to refuse when its gyro bias hides the earth rate; None: not checked.
     """
+
+    positive_options = ("history_points", "fit_points")
 
     name = "coarse-i0"
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)

@@ -74,3 +74,31 @@ def test_every_method_refuses_bad_samples_a_latitude_beyond_its_limit_and_a_shor
 def test_a_site_names_a_bad_coordinate(lat, lon, words):
     with pytest.raises(ValueError, match=words):
         Site.from_degrees(lat, lon)
+
+
+@pytest.mark.parametrize("spec, option, value, words", [
+    ("adrc", "h1", -4, "adrc: option h1: expected a positive number, found -4"),
+    ("adrc", "h1", 0, "adrc: option h1: expected a positive number, found 0"),
+    ("adrc", "h1", "fast", "adrc: option h1: expected a positive number, found 'fast'"),
+    ("adrc", "shot_s", -40, "adrc: option shot_s: expected a positive number, found -40"),
+    ("pid", "step_s", -0.1, "pid: option step_s: expected a positive number, found -0.1"),
+    ("kf", "coarse_s", -5, "kf: option coarse_s: expected a number >= 0, found -5"),
+    ("kf", "step_s", float("nan"), "kf: option step_s: expected a positive number, found nan"),
+    ("coarse", "history_points", 2.5, "coarse: option history_points: expected a positive whole number, found 2.5"),
+    ("gtsam", "marginals", 1, "gtsam: option marginals: expected true or false, found 1"),
+])
+def test_a_bad_option_is_refused_when_the_method_is_built(spec, option, value, words):
+    with pytest.raises(ValueError) as exc:
+        load_method(spec, **{option: value})
+    assert str(exc.value) == words
+
+
+def test_a_variants_bad_option_names_the_variant(tmp_path):
+    from fusionbench import scenarios
+
+    p = tmp_path / "v.toml"
+    p.write_text('name = "v"\nduration_s = 30.0\nrate_hz = 50.0\nmethods = ["fast"]\n[site]\nlat_deg = 34.0\n'
+                 '[variants.fast]\nmethod = "adrc"\nh1 = -4.0\n')
+    with pytest.raises(scenarios.ScenarioError) as exc:
+        scenarios.load(p).method("fast")
+    assert "v.toml: field 'variants.fast': adrc: option h1: expected a positive number, found -4.0" in str(exc.value)
