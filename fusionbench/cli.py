@@ -13,12 +13,14 @@ import inspect
 import json
 import os
 import re
+import signal
 import sys
 import time
 import traceback
 from pathlib import Path
 
 import numpy as np
+from joblib import parallel_config
 
 from . import __version__, attitude, progress, provenance, reportdir, scenarios
 from .aligner import (GROUP, MAX_BIAS_TO_EARTH_RATE, AlignmentResult, Site, available_methods, check_time_rule,
@@ -343,6 +345,11 @@ def _quiet_stdout():
         pass
 
 
+def _worker_ignores_sigint():
+    """A worker process's start: SIGINT ignored (the parent handles a Ctrl-C and stops the workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def main(argv=None):
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); returns the exit status (0 done, 1 a check
     found a regression, 2 an error, 130 interrupted, 141 standard output closed)."""
@@ -356,7 +363,10 @@ def main(argv=None):
     os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker")
     commands = {"list": _cmd_list, "align": _cmd_align, "run": _cmd_run, "check": _cmd_check}
     try:
-        status = commands[args.command](args)
+        # the workers leave a Ctrl-C to this process, which stops them: a worker interrupted inside a library's
+        # clean-up would print its own traceback beside our one line
+        with parallel_config(backend="loky", initializer=_worker_ignores_sigint):
+            status = commands[args.command](args)
         sys.stdout.flush()  # a closed pipe shows here, not in Python's last flush at exit
         return status
     except KeyboardInterrupt:
