@@ -23,14 +23,25 @@ def is_number(v):
     return isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(v))
 
 
+#: What :func:`_value` returns for an absent key that has a default.
+_ABSENT = object()
+
+
+def _value(d, key, src, default, label):
+    """``d[key]``; a FieldError when it is absent and required (``default`` None), else :data:`_ABSENT`."""
+    if key in d:
+        return d[key]
+    if default is None:
+        raise FieldError(f"{where(src, label)} is missing")
+    return _ABSENT
+
+
 def number(d, key, src, default=None, lo=-np.inf, hi=np.inf, label=None):
     """The number ``d[key]`` within ``[lo, hi]`` as a float, or ``default`` when absent (None: required)."""
     label = label or key
-    if key not in d:
-        if default is None:
-            raise FieldError(f"{where(src, label)} is missing")
+    v = _value(d, key, src, default, label)
+    if v is _ABSENT:
         return default
-    v = d[key]
     if not is_number(v) or not lo <= v <= hi:
         raise FieldError(f"{where(src, label)}: expected a number in [{lo:g}, {hi:g}], found {v!r}")
     return float(v)
@@ -53,11 +64,9 @@ def vector(d, key, src, default=(0.0, 0.0, 0.0), n=3, lo=-np.inf, hi=np.inf, lab
 def string(d, key, src, default=None, choices=None, label=None):
     """The string ``d[key]`` (one of ``choices`` if given), or ``default`` when absent (None: required)."""
     label = label or key
-    if key not in d:
-        if default is None:
-            raise FieldError(f"{where(src, label)} is missing")
+    v = _value(d, key, src, default, label)
+    if v is _ABSENT:
         return default
-    v = d[key]
     if not isinstance(v, str) or (choices is not None and v not in choices):
         expected = f"one of {sorted(choices)}" if choices is not None else "a string"
         raise FieldError(f"{where(src, label)}: expected {expected}, found {v!r}")
