@@ -229,6 +229,8 @@ def _cmd_run(args):
 
     names = scenarios.builtin_names() if args.scenario == "all" else [args.scenario]
     scns = [scenarios.get(n) for n in names]  # validate every scenario before running any
+    if args.methods is not None and not args.methods.strip(", "):
+        raise ValueError(f"--methods: expected comma-separated method names, found {args.methods!r}")
     methods = args.methods.split(",") if args.methods else None
     _check_methods(scns, methods)
     out_dir = Path(args.out)

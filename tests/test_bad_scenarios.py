@@ -76,3 +76,26 @@ def test_a_navigation_scenario_needs_an_initial_attitude_and_navigators(tmp_path
     assert scn.kind == "navigation" and scn.method("damped-nav").name == "damped-nav"
     with pytest.raises(ValueError, match="method 'coarse': expected a navigator"):
         scn.method("coarse")
+
+
+@pytest.mark.parametrize("edit, field, words", CASES[:6] + CASES[-3:], ids=[c[1] for c in CASES[:6] + CASES[-3:]])
+def test_the_command_line_refuses_a_bad_scenario_before_any_run_exit_2(tmp_path, capsys, edit, field, words):
+    from fusionbench.cli import main
+
+    text = BASE.replace(*edit) if isinstance(edit, tuple) else (edit + "\n" + BASE if edit.startswith("experiment")
+                                                              else BASE + edit + "\n")
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fusionbench: error: ") and err.count("\n") == 1 and field in err and words in err, err
+    assert not (tmp_path / "out").exists()  # nothing written
+
+
+def test_an_empty_methods_option_is_refused(tmp_path, capsys):
+    from fusionbench.cli import main
+
+    path = tmp_path / "ok.toml"
+    path.write_text(BASE)
+    assert main(["run", str(path), "--methods", "", "--out", str(tmp_path / "out")]) == 2
+    assert "--methods: expected comma-separated method names, found ''" in capsys.readouterr().err
