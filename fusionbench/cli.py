@@ -71,9 +71,7 @@ def _parser():
     a = sub.add_parser("align", parents=[debug],
                        help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
     a.add_argument("imu_file")
-    a.add_argument("--lat", type=float, required=True, help="latitude, deg")
-    a.add_argument("--lon", type=float, default=0.0, help="longitude, deg")
-    a.add_argument("--height", type=float, default=0.0, help="height, m")
+    _site_arguments(a)
     a.add_argument("--method", default="coarse", help="method name (see list; named variants included) or "
                    "module:Class (default coarse)")
     a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
@@ -101,6 +99,30 @@ def _parser():
     c.add_argument("--reference", help="reference folder or file (default: the references installed with "
                    "fusionbench for the run's size, --quick or default, seed 0)")
     return p
+
+
+def _site_arguments(p):
+    p.add_argument("--lat", type=float, help="latitude, deg (default: the file's header, for .imu; required for "
+                   "other files)")
+    p.add_argument("--lon", type=float, help="longitude, deg (default: the file's header, else 0)")
+    p.add_argument("--height", type=float, help="height, m (default: the file's header, else 0)")
+
+
+def _site(args, meta):
+    """The site of a recording: each of --lat, --lon, --height given on the command line wins over the file's
+    header (a PSINS .imu holds all three); a file without a header needs --lat (longitude and height default
+    to 0)."""
+    if not meta:  # the command line's own values alone
+        return Site.from_degrees(args.lat, args.lon or 0.0, args.height or 0.0) if args.lat is not None else None
+    if args.lat is None and "lat" not in meta:
+        from .imufiles import IMUFileError
+
+        raise IMUFileError(meta["path"], f"a {meta['format']} file holds no site: give --lat DEG (and --lon DEG, "
+                                         f"--height M; they default to 0)")
+    lat = args.lat if args.lat is not None else np.degrees(meta["lat"])
+    lon = args.lon if args.lon is not None else np.degrees(meta.get("lon", 0.0))
+    h = args.height if args.height is not None else meta.get("h", 0.0)
+    return Site.from_degrees(lat, lon, h)
 
 
 def _cmd_list(args):
@@ -147,8 +169,9 @@ def _cmd_align(args):
 
     noise = None if args.imu is None else load_spec(args.imu)
     method = _named(args.method, lambda: load_method(args.method, imu=noise), group=GROUP)
-    site = Site.from_degrees(args.lat, args.lon, args.height)
-    imu, _ = read_imu(args.imu_file)
+    _site(args, {})  # what the command line gives is checked before the file is read
+    imu, meta = read_imu(args.imu_file)
+    site = _site(args, meta)
     if imu.duration < method.min_duration_s:
         raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
                            f"it needs at least {method.min_duration_s:g} s")

@@ -17,6 +17,9 @@ PSINS ``.imu``
     ``[lat0 lon0 (deg) h0 (m) t0 (s) sampling interval (ms) g (m/s^2)]``,
     ``[gyro scale (arcsec/count) x3, accel scale (ug*s/count) x3]``, then one row of six integer
     counts per sample (gyro x, y, z, accel x, y, z). Read as ``IMUData(kind="increment")``.
+    PSINS's own writer (``imufile.m``) also makes a 7-column variant when the sampling times
+    jitter: each header row ends with a 0, and each sample row with the integer time dither in
+    microseconds; sample k is then at ``t0 + (k + 1) dt + 1e-6 * (dither_0 + ... + dither_k)``.
 
 Problems with a file raise :class:`IMUFileError` (one line). Writers are atomic.
 """
@@ -235,10 +238,12 @@ def read_psins(path, min_samples=2):
     imu : IMUData
         ``kind="increment"``, one run: ``t = t0 + (k + 1) dt`` s for row k; ``gyro`` =
         ``counts * scale * arcsec`` (rad); ``accel`` = ``counts * scale * 1e-6 * g`` (m/s).
+        In the 7-column variant the time dither (us) summed up to row k is added to its ``t``; the
+        times must still be uniform to :data:`fusionbench.imudata.STEP_TOLERANCE`.
     meta : dict
         ``path``, ``format`` ("psins"), ``attitude0`` [pitch, roll, yaw] rad, ``v0`` [VE, VN, VU]
-        m/s, ``lat``, ``lon`` rad, ``h`` m, ``t0``, ``dt`` s, ``g`` m/s^2,
-        ``gyro_scale_arcsec``, ``accel_scale_ugs`` (3 each), ``samples``.
+        m/s, ``lat``, ``lon`` rad, ``h`` m (the site of the recording), ``t0``, ``dt`` s, ``g``
+        m/s^2, ``gyro_scale_arcsec``, ``accel_scale_ugs`` (3 each), ``samples``, ``columns`` (6 or 7).
     """
     lines = _lines(path, "%")
     if len(lines) < 3:
@@ -247,24 +252,28 @@ def read_psins(path, min_samples=2):
     for r, (ln, s) in enumerate(lines[:3]):
         f, names = s.split(), _PSINS_FIELDS[r]
         where = f"header row {r + 1} (line {ln})"
-        if len(f) != 6:
-            raise IMUFileError(path, f"{where} has {len(f)} fields, expected 6 ({' '.join(names)})")
-        for x, name in zip(f, names):
+        if len(f) not in (6, 7):
+            raise IMUFileError(path, f"{where} has {len(f)} fields, expected 6 ({' '.join(names)}), or 7 with "
+                                     f"PSINS's trailing 0")
+        for x, name in zip(f, (*names, "(7th)")):
             if not _is_number(x, float):
                 raise IMUFileError(path, f"{where}: field '{name}' is {_cell(x)}, expected a number")
-            pos = r == 2 or name in ("dt_ms", "g")
+            pos = (r == 2 or name in ("dt_ms", "g")) and name != "(7th)"
             if not np.isfinite(float(x)) or (pos and float(x) <= 0):
                 raise IMUFileError(path, f"{where}: field '{name}' is {x}, expected a "
                                          f"{'positive ' if pos else ''}finite number")
-            head.append(float(x))
+            if name != "(7th)":
+                head.append(float(x))
     rows = lines[3:]
     fields = [s.split() for _, s in rows]
+    width = len(fields[0]) if fields and len(fields[0]) in (6, 7) else 6
     for k, f in enumerate(fields):
-        if len(f) != 6:
-            raise IMUFileError(path, f"sample row {k} (line {rows[k][0]}) has {len(f)} fields, "
-                                     f"expected 6 integers (gyro x y z, accel x y z)")
+        if len(f) != width:
+            raise IMUFileError(path, f"sample row {k} (line {rows[k][0]}) has {len(f)} fields, expected {width} "
+                                     f"integers (gyro x y z, accel x y z{', time dither (us)' * (width == 7)}"
+                                     f"{' as in sample row 0' * (k > 0)})")
     try:
-        counts = np.array(fields, dtype=np.int64).reshape(-1, 6)
+        counts = np.array(fields, dtype=np.int64).reshape(-1, width)
     except (ValueError, OverflowError):
         k, x = next((k, x) for k, f in enumerate(fields) for x in f
                     if not _is_number(x, int) or not -2**63 <= int(x) < 2**63)
@@ -273,14 +282,19 @@ def read_psins(path, min_samples=2):
     _too_short(path, counts.shape[0], min_samples)
     h = np.array(head)
     dt, g = float(h[10]) * 1e-3, float(h[11])
+    # PSINS's time rule (imufile.m): row k ends at t0 + (k + 1) dt, plus the dither summed so far (us)
     t = h[9] + dt * np.arange(1, counts.shape[0] + 1)
+    if width == 7:
+        t = t + np.cumsum(counts[:, 6]) * 1e-6
     gyro = counts[:, :3] * (h[12:15] * ARCSEC)
-    accel = counts[:, 3:] * (h[15:18] * 1e-6 * g)
-    _check_samples(path, t, gyro, accel, min_samples, lambda k: f"sample row {k} (line {rows[k][0]})", scale=dt)
+    accel = counts[:, 3:6] * (h[15:18] * 1e-6 * g)
+    _check_samples(path, t, gyro, accel, min_samples, lambda k: f"sample row {k} (line {rows[k][0]})"
+                   + (" (time from t0, dt and the dither column)" * (width == 7)), scale=dt)
     h = h.tolist()
     meta = {"path": os.fspath(path), "format": "psins", "attitude0": [a * DEG for a in h[0:3]],
             "v0": h[3:6], "lat": h[6] * DEG, "lon": h[7] * DEG, "h": h[8], "t0": h[9], "dt": dt,
-            "g": g, "gyro_scale_arcsec": h[12:15], "accel_scale_ugs": h[15:18], "samples": len(t)}
+            "g": g, "gyro_scale_arcsec": h[12:15], "accel_scale_ugs": h[15:18], "samples": len(t),
+            "columns": width}
     return IMUData(t, gyro[None], accel[None], kind="increment"), meta
 
 

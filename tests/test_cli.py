@@ -54,6 +54,30 @@ def test_align_json_on_a_written_csv_from_any_heading(tmp_path, heading):
     assert out["t_end"] == pytest.approx(120.0 - 0.005, abs=1e-9)
 
 
+def test_align_takes_the_site_from_a_psins_header_and_an_explicit_value_wins(tmp_path):
+    fixture = Path(__file__).parent / "data" / "pyins_sway_lat30s.imu"
+    truth = json.loads(fixture.with_suffix(".json").read_text())
+    header = cli("align", fixture, "--method", "kf", "--json")
+    assert header.returncode == 0, header.stderr
+    given = cli("align", fixture, "--method", "kf", "--lat", truth["lat_deg"], "--lon", truth["lon_deg"],
+                "--height", truth["height_m"], "--json")
+    assert json.loads(header.stdout) == json.loads(given.stdout)
+    # the header's site is the right one: the fine alignment of this perfect 2-minute record lands on the truth
+    # (0.02 deg), whereas the filter told 30 N instead of the header's 30 S settles 0.17 deg away
+    heading = json.loads(header.stdout)["heading_deg"]
+    assert heading == pytest.approx(truth["last_heading_deg"], abs=0.05)
+    other = json.loads(cli("align", fixture, "--method", "kf", "--lat", 30, "--json").stdout)["heading_deg"]
+    assert abs(other - truth["last_heading_deg"]) > 0.1
+
+
+def test_align_a_file_without_a_site_needs_lat(tmp_path):
+    tr = tj.Trajectory(0.6, 0.0, 0.0, tj.EulerSway(), duration=20.0)
+    path = write_csv(tmp_path / "nosite.csv", simulate(tr, PRESETS["navigation"].noise_free(), 0.01))
+    r = cli("align", path)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "nosite.csv" in r.stderr and "--lat" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_align_bad_file_is_one_clear_line_and_exit_2(tmp_path):
     p = tmp_path / "bad.csv"
     p.write_text("t,gx,gy,gz,ax,ay\n0,0,0,0,0,0\n")
