@@ -90,6 +90,10 @@ def _parser():
                         "folder per scenario and the overview in it; a report folder is replaced whole when the "
                         "new one is complete, and only if it is new, empty or a previous report (metrics.json, no "
                         "sub-folder): any other folder is refused, nothing in it touched")
+    r.add_argument("--imu", help="your IMU for one scenario: a preset or an IMU spec .toml (as `identify` writes "
+                   "it); replaces the scenario's [imu] (a conformance matrix's imu); required by a template (twin)")
+    r.add_argument("--site", type=_site_text, help="your site for one scenario: LAT[,LON[,H]] in deg, deg, m; "
+                   "replaces the scenario's [site]; required by a template (twin)")
     r.add_argument("--jobs", type=_integer("a non-zero worker count (-1: all cores)", lambda v: v != 0), default=-1,
                    help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
                         "process; the numbers do not depend on it")
@@ -99,6 +103,30 @@ def _parser():
     c.add_argument("--reference", help="reference folder or file (default: the references installed with "
                    "fusionbench for the run's size, --quick or default, seed 0)")
     return p
+
+
+def _site_text(text):
+    """``LAT[,LON[,H]]`` (deg, deg, m) as the ``[site]`` table of a scenario."""
+    parts = text.split(",")
+    try:
+        values = [float(x) for x in parts]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 3 or not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected LAT[,LON[,H]] in deg, deg, m (e.g. 34.2,108.9,450), found {text!r}")
+    return dict(zip(("lat_deg", "lon_deg", "height_m"), values))
+
+
+def _overrides(args):
+    """The scenario entries ``run --imu`` and ``--site`` replace (an IMU file's path made absolute)."""
+    out = {}
+    if args.imu is not None:
+        from .imu import PRESETS
+
+        out["imu"] = args.imu if args.imu in PRESETS else str(Path(args.imu).expanduser().resolve())
+    if args.site is not None:
+        out["site"] = args.site
+    return out
 
 
 def _site_arguments(p):
@@ -250,8 +278,19 @@ def _cmd_run(args):
     from .experiment import write_scenario_report
     from .experiment import run_scenario
 
-    names = scenarios.builtin_names() if args.scenario == "all" else [args.scenario]
-    scns = [scenarios.get(n) for n in names]  # validate every scenario before running any
+    overrides = _overrides(args)
+    if args.scenario == "all":
+        if overrides:
+            raise ValueError("--imu and --site replace one scenario's sensor and site, not those of 'all': name a "
+                             "scenario (e.g. run twin --imu my_imu.toml --site 34.2,108.9,450)")
+        names = [n for n in scenarios.builtin_names() if not getattr(scenarios.get(n), "template", False)]
+    else:
+        names = [args.scenario]
+    scns = [scenarios.get(n, overrides) for n in names]  # validate every scenario before running any
+    for scn in scns:
+        if getattr(scn, "template", False) and not {"imu", "site"} <= set(overrides):
+            raise ValueError(f"scenario {scn.name!r} is a template of your sensor: give --imu FILE.toml (e.g. what "
+                             f"`fusionbench identify` writes) and --site LAT,LON,H")
     if args.methods is not None and not args.methods.strip(", "):
         raise ValueError(f"--methods: expected comma-separated method names, found {args.methods!r}")
     methods = args.methods.split(",") if args.methods else None
@@ -281,6 +320,8 @@ def _cmd_run(args):
             m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
                                                  duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
                                                  quick=args.quick, wall_s=wall)
+            if overrides:  # the sensor and site this run was given instead of the scenario's own
+                m["provenance"]["overrides"] = overrides
             folder = out_dir / scn.name if args.scenario == "all" else out_dir
             path = write_scenario_report(res, folder)  # with report.html, whole or not at all
             outs.append((scn, m, path))

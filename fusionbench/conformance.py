@@ -32,6 +32,7 @@ condition) and adds ``conditions``, ``cells`` and ``scoreboard``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from joblib import Parallel, delayed
@@ -53,13 +54,16 @@ MOVING_ACCEL = 0.1 * units.G0
 #: Mean tilt of every base, deg (pitch, roll): a level IMU would hide sign errors between the level axes.
 TILT_DEG = (1.0, -2.0)
 _TOP = {"name", "description", "kind", "experiment", "duration_s", "rate_hz", "runs", "methods", "quick", "metrics",
-        "conformance", "condition", "paper"}
+        "conformance", "condition", "paper", "imu", "site", "template", "run_unclaimed"}
+#: Longitude (deg) and height (m) of a condition when the matrix gives no ``[site]``.
+DEFAULT_LON_DEG, DEFAULT_HEIGHT_M = 108.0, 100.0
 _CONDITION_KEYS = {"name", "base", "lat_deg", "heading_deg", "imu", "vref_sigma_mps", "expect"}
 
 
 @dataclass(frozen=True)
 class Condition:
-    """One condition of the matrix (deg, m/s); ``expect`` is "align" or "refuse"."""
+    """One condition of the matrix (deg, m/s, m); ``expect`` is "align" or "refuse"; ``imu`` a preset name or the
+    absolute path of an IMU spec file."""
 
     name: str
     base: str
@@ -68,6 +72,8 @@ class Condition:
     imu: str
     vref_sigma_mps: float = 0.0
     expect: str = "align"
+    lon_deg: float = DEFAULT_LON_DEG
+    height_m: float = DEFAULT_HEIGHT_M
 
     @property
     def kind(self):
@@ -94,6 +100,8 @@ class Matrix:
     paper: dict = field(default_factory=dict)
     experiment: str = "conformance"
     kind: str = "conformance"
+    template: bool = False
+    run_unclaimed: bool = False
 
     def sized(self, quick):
         """(duration_s, runs) for a full or a quick run."""
@@ -129,6 +137,16 @@ def parse(data, src="<conformance>"):
         raise fields.FieldError(f"{fields.where(src, 'conformance.efficiency')}: expected a table with 'default' and "
                                 f"per-method thresholds, found {eff!r}")
     eff = {k: fields.number(eff, k, src, lo=1.0, hi=1e6, label=f"conformance.efficiency.{k}") for k in eff}
+    sensor = data.get("imu")
+    if sensor is not None:
+        spec = imu.spec_field(sensor, src)  # checked here, once
+        sensor = sensor if sensor in imu.PRESETS else str(imu.near(sensor, src).resolve())
+    site = fields.table(data, "site", src, {"lat_deg", "lon_deg", "height_m"})
+    site_lat = fields.number(site, "lat_deg", src, lo=-89.0, hi=89.0, label="site.lat_deg") if "lat_deg" in site else None
+    template, unclaimed = data.get("template", False), data.get("run_unclaimed", False)
+    for key, value in (("template", template), ("run_unclaimed", unclaimed)):
+        if not isinstance(value, bool):
+            raise fields.FieldError(f"{fields.where(src, key)}: expected true or false, found {value!r}")
     items = data.get("condition")
     if not isinstance(items, list) or not items:
         raise fields.FieldError(f"{fields.where(src, 'condition')}: expected [[condition]] tables, found {items!r}")
@@ -145,13 +163,21 @@ def parse(data, src="<conformance>"):
         if cname in seen:
             raise fields.FieldError(f"{fields.where(src, label + '.name')}: expected a unique name, found {cname!r} again")
         seen.add(cname)
+        lat = fields.number(c, "lat_deg", src, site_lat, lo=-89.0, hi=89.0, label=f"{label}.lat_deg")
+        cimu = fields.string(c, "imu", src, sensor, choices=None if sensor else imu.PRESETS, label=f"{label}.imu")
+        if cimu != sensor and cimu not in imu.PRESETS:
+            raise fields.FieldError(f"{fields.where(src, label + '.imu')}: expected one of {sorted(imu.PRESETS)} (or "
+                                    f"the matrix's own imu), found {cimu!r}")
+        expect = fields.string(c, "expect", src, "align", choices=("align", "refuse", "auto"), label=f"{label}.expect")
+        if expect == "auto":  # refuse where the gyro bias hides the earth rate (every aligner given the model does)
+            ratio = azimuth_bias_ratio(spec if cimu == sensor else imu.PRESETS[cimu], np.radians(lat))
+            expect = "refuse" if ratio > aligner.MAX_BIAS_TO_EARTH_RATE else "align"
         conds.append(Condition(
-            cname, fields.string(c, "base", src, choices=BASES, label=f"{label}.base"),
-            fields.number(c, "lat_deg", src, lo=-89.0, hi=89.0, label=f"{label}.lat_deg"),
-            fields.number(c, "heading_deg", src, lo=-360.0, hi=360.0, label=f"{label}.heading_deg"),
-            fields.string(c, "imu", src, choices=imu.PRESETS, label=f"{label}.imu"),
-            fields.number(c, "vref_sigma_mps", src, 0.0, lo=0.0, hi=10.0, label=f"{label}.vref_sigma_mps"),
-            fields.string(c, "expect", src, "align", choices=("align", "refuse"), label=f"{label}.expect")))
+            cname, fields.string(c, "base", src, choices=BASES, label=f"{label}.base"), lat,
+            fields.number(c, "heading_deg", src, lo=-360.0, hi=360.0, label=f"{label}.heading_deg"), cimu,
+            fields.number(c, "vref_sigma_mps", src, 0.0, lo=0.0, hi=10.0, label=f"{label}.vref_sigma_mps"), expect,
+            fields.number(site, "lon_deg", src, DEFAULT_LON_DEG, lo=-360.0, hi=360.0, label="site.lon_deg"),
+            fields.number(site, "height_m", src, DEFAULT_HEIGHT_M, lo=-1e4, hi=1e5, label="site.height_m")))
     return Matrix(name, str(data.get("description", "")), tuple(conds), duration, rate, runs,
                   fields.number(quick, "duration_s", src, duration, lo=10.0, hi=duration, label="quick.duration_s"),
                   int(fields.number(quick, "runs", src, float(min(runs, 3)), lo=1, hi=runs, label="quick.runs")),
@@ -159,7 +185,8 @@ def parse(data, src="<conformance>"):
                   fields.number(met, "settling_band_arcmin", src, 30.0, lo=1e-3, hi=1e4, label="metrics.settling_band_arcmin"),
                   fields.number(conf, "level_tolerance_arcmin", src, 0.5, lo=0.0, hi=1e4,
                                 label="conformance.level_tolerance_arcmin"),
-                  eff, src, dict(data.get("paper", {})))
+                  eff, src, dict(data.get("paper", {})), template=template,
+                  run_unclaimed=unclaimed)
 
 
 def aligner_names():
@@ -176,12 +203,12 @@ def condition_scenario(matrix, cond, quick=False, band_arcmin=None):
     _, amp, freq = BASES[cond.base]
     d = {"name": f"{matrix.name}.{cond.name}",
          "description": f"conformance condition {cond.name}: {cond.base} base, {cond.lat_deg:g} deg latitude, heading "
-                        f"{cond.heading_deg:g} deg, {cond.imu} IMU, reference noise {cond.vref_sigma_mps:g} m/s",
+                        f"{cond.heading_deg:g} deg, {Path(cond.imu).stem} IMU, reference noise {cond.vref_sigma_mps:g} m/s",
          "duration_s": duration, "rate_hz": matrix.rate_hz, "runs": runs, "quick": {"duration_s": duration, "runs": runs},
-         "site": {"lat_deg": cond.lat_deg, "lon_deg": 108.0, "height_m": 100.0},
+         "site": {"lat_deg": cond.lat_deg, "lon_deg": cond.lon_deg, "height_m": cond.height_m},
          "attitude": {"pitch_deg": TILT_DEG[0], "roll_deg": TILT_DEG[1], "heading_deg": cond.heading_deg,
                       "sway_amplitude_deg": list(amp), "sway_frequency_hz": list(freq)},
-         "imu": {"preset": cond.imu},
+         "imu": cond.imu,
          "vref": {"sigma_mps": [cond.vref_sigma_mps] * 3},
          "metrics": {"settling_band_arcmin": matrix.settling_band_arcmin if band_arcmin is None else band_arcmin}}
     if cond.kind == "moving":
@@ -231,9 +258,10 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         band = max(matrix.settling_band_arcmin, 3.0 * bound[2] / units.ARCMIN)
         scn = condition_scenario(matrix, cond, quick, band_arcmin=band)
         ratio = azimuth_bias_ratio(scn.imu_spec, np.radians(cond.lat_deg))
-        claimed = [n for n in names if cond.expect == "refuse" or claims[n].covers(cond.kind, cond.lat_deg, ratio)]
+        covered = {n for n in names if cond.expect == "refuse" or claims[n].covers(cond.kind, cond.lat_deg, ratio)}
+        claimed = list(names) if matrix.run_unclaimed else [n for n in names if n in covered]
         conditions[cond.name] = {"base": cond.base, "lat_deg": cond.lat_deg, "heading_deg": cond.heading_deg,
-                                 "imu": cond.imu, "vref_sigma_mps": cond.vref_sigma_mps, "expect": cond.expect,
+                                 "imu": scn.imu_spec.name, "vref_sigma_mps": cond.vref_sigma_mps, "expect": cond.expect,
                                  "gyro_bias_ratio": float(ratio),
                                  "bound_arcmin": _axes(bound / units.ARCMIN), "settling_band_arcmin": band}
         for n in names:
@@ -257,6 +285,8 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         conditions[cond.name]["limit_arcmin"] = _axes(out.limits / units.ARCMIN)
         for n in claimed:
             cells[n][cond.name] = _cell(matrix, cond, n, out, bound)
+            if n not in covered:  # run by the file's choice (run_unclaimed): scored, and marked outside the claim
+                cells[n][cond.name]["claimed"] = False
     return MatrixOutput(matrix, _metrics(matrix, names, conditions, cells, outputs, runs, seed, quick, duration), outputs)
 
 
@@ -296,7 +326,7 @@ def _metrics(matrix, names, conditions, cells, outputs, runs, seed, quick, durat
     first = next((outputs[c.name] for c in matrix.conditions if c.name in outputs), None)
     board, passed, total = {}, 0, 0
     for n in names:
-        mine = [c for c in cells[n].values() if c["status"] != "not claimed"]
+        mine = [c for c in cells[n].values() if c["status"] != "not claimed" and c.get("claimed", True)]
         effs = [c["efficiency_U"] for c in mine if "efficiency_U" in c and not c.get("refused")]
         ok = sum(c["status"] == "pass" for c in mine)
         board[n] = {"claimed": len(mine), "passed": ok, "worst_efficiency": float(max(effs)) if effs else None,

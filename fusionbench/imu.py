@@ -33,7 +33,7 @@ from .imudata import IMUData
 
 __all__ = ["SensorErrors", "IMUSpec", "NoiseSchedule", "VelocityReferenceSpec",
            "PRESETS", "simulate", "simulate_chunks", "simulate_vref", "run_seed_sequence",
-           "spec_from_table", "schedules_from_list", "load_spec"]
+           "spec_from_table", "schedules_from_list", "load_spec", "spec_field", "near"]
 
 # stream indices inside a run's SeedSequence
 _CONST, _G_WHITE, _A_WHITE, _G_GM, _A_GM, _G_RW, _A_RW, _VREF = range(8)
@@ -304,6 +304,34 @@ def load_spec(source):
     table = dict(data["imu"])
     table.setdefault("name", path.stem)
     return spec_from_table(table, str(path))
+
+
+def spec_field(value, src, label="imu"):
+    """The IMU of a scenario or matrix field ``label``: an ``[imu]`` table (:func:`spec_from_table`), or a string,
+    a preset name or an IMU spec .toml file (:func:`load_spec`), relative to the folder of the file ``src`` when
+    ``src`` is one (else to the working directory).
+
+    Raises
+    ------
+    ValueError
+        One line naming the file and the field, or the IMU spec file and its field.
+    """
+    if isinstance(value, dict):
+        return spec_from_table(value, src, label)
+    if not isinstance(value, str) or not value:
+        raise fields.FieldError(f"{fields.where(src, label)}: expected an [{label}] table, a preset name "
+                                f"({', '.join(PRESETS)}) or an IMU spec .toml file, found {value!r}")
+    try:
+        return load_spec(value if value in PRESETS else str(near(value, src)))
+    except ValueError as exc:  # the IMU file's own message, after the field that names it
+        raise fields.FieldError(f"{fields.where(src, label)}: {str(exc).splitlines()[0]}") from None
+
+
+def near(path, src):
+    """``path`` as written in the file ``src``: relative to that file's folder when ``src`` is an existing file and
+    ``path`` is relative, else as it is."""
+    p, home = Path(path).expanduser(), Path(str(src))
+    return home.parent / p if not p.is_absolute() and home.is_file() else p
 
 
 @dataclass(frozen=True)

@@ -155,7 +155,7 @@ def _schedules(items, src, key):
 
 
 def _imu_spec(d, src):
-    return imu.spec_from_table(d, src)
+    return imu.spec_field(d, src)
 
 
 def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
@@ -168,7 +168,7 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     if unknown:
         raise ScenarioError(f"{_where(src, sorted(unknown)[0])}: unknown (expected one of {sorted(_TOP)})")
     for sec, keys in sections().items():
-        if sec in data:
+        if sec in data and not (sec == "imu" and isinstance(data[sec], str)):  # imu: a table, a preset or a file
             if not isinstance(data[sec], dict):
                 raise ScenarioError(f"{_where(src, sec)}: expected a table, found {data[sec]!r}")
             bad = set(data[sec]) - keys
@@ -299,8 +299,9 @@ def _kind(data, src, given, has_rmse_window, moves):
     return "navigation" if has_rmse_window else "moving-alignment" if moves else "alignment"
 
 
-def load(path) -> Scenario:
-    """Load and validate a scenario from a TOML file path."""
+def load(path, overrides=None) -> Scenario:
+    """Load and validate a scenario from a TOML file path; ``overrides`` replace top-level entries of the file
+    (see :func:`get`)."""
     path = Path(path)
     try:
         with open(path, "rb") as fh:
@@ -314,11 +315,14 @@ def load(path) -> Scenario:
                             f"at byte {exc.start})") from None
     except IsADirectoryError:
         raise ScenarioError(f"{path}: expected a scenario file, found a folder") from None
-    return _parse_any(data, str(path))
+    return _parse_any(data, str(path), overrides)
 
 
-def _parse_any(data, src):
-    """The scenario object of the file's experiment (``experiment``, default ``alignment``): its ``load``."""
+def _parse_any(data, src, overrides=None):
+    """The scenario object of the file's experiment (``experiment``, default ``alignment``): its ``load``; the
+    ``overrides`` replace top-level entries first."""
+    if overrides:
+        data = {**data, **overrides}
     return _experiment(data.get("experiment", "alignment"), src).load(data, src)
 
 
@@ -327,12 +331,17 @@ def builtin_names():
     return sorted(p.name[:-5] for p in resources.files(__name__).iterdir() if p.name.endswith(".toml"))
 
 
-def get(name_or_path) -> Scenario:
-    """A built-in scenario by name, or a scenario file by path."""
+def get(name_or_path, overrides=None) -> Scenario:
+    """A built-in scenario by name, or a scenario file by path.
+
+    ``overrides`` replace top-level entries of the file before it is validated, e.g. ``{"imu": "my_imu.toml",
+    "site": {"lat_deg": 34.2}}`` (the command line's ``run --imu`` and ``--site``); give an IMU file's path
+    absolute (a relative one would be taken relative to the scenario file's folder).
+    """
     if name_or_path in builtin_names():
         ref = resources.files(__name__) / f"{name_or_path}.toml"
-        return _parse_any(tomllib.loads(ref.read_text()), f"{name_or_path}.toml")
+        return _parse_any(tomllib.loads(ref.read_text()), f"{name_or_path}.toml", overrides)
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
-        return load(p)
+        return load(p, overrides)
     raise ScenarioError(f"scenario {name_or_path!r}: expected a built-in name ({', '.join(builtin_names())}) or a .toml file")
