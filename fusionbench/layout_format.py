@@ -22,6 +22,17 @@ Kinds
 ``"rate"``: angular rate and specific force sampled at the row's time. ``"increment"``: the row at time t holds
 the angle and velocity increments over ``(t - dt, t]`` (the convention of fusionbench and KF-GINS), so the
 initial state belongs to ``t[0] - dt``.
+
+Built-ins
+---------
+``"pyins"``: the CSV pyins (PyPI ``python-ins``) writes with ``imu_dataframe.to_csv(path)``, header
+``time,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z``, s, rad/s, m/s^2, body FRD
+(``sim.generate_imu(..., sensor_type="rate")``). ``"pyins-increment"``: the same with ``sensor_type="increment"``
+(rad, m/s). pyins repeats the first increment at the first time stamp ("the first sample is duplicated for more
+convenient future processing", pyins/sim.py); this layout drops that row (``skip_rows=1``), so row k holds the
+increment over ``(t_{k-1}, t_k]`` and the initial state belongs to the first time stamp. ``"kf-gins"``: the i2Nav
+KF-GINS IMU text file, no header, whitespace separated, GNSS seconds of week (s), angle increments x y z (rad),
+velocity increments x y z (m/s), body FRD. ``"fusionbench-csv"``: fusionbench's own CSV as a layout.
 """
 
 from __future__ import annotations
