@@ -6,6 +6,8 @@ was expected and what was found: ``"my.toml: field 'imu.arw_dpsh': expected ...,
 
 from __future__ import annotations
 
+import tomllib
+
 import numpy as np
 
 
@@ -83,3 +85,19 @@ def table(d, key, src, keys, label=None):
     if bad:
         raise FieldError(f"{where(src, label + '.' + bad[0])}: unknown (expected one of {sorted(keys)})")
     return t
+
+
+def read_toml(path, what):
+    """The TOML file ``path`` as a dict, or a one-line ValueError naming the file when it is missing, a folder,
+    unreadable or not TOML; ``what`` names the file expected (e.g. "layout file")."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such {what}") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: is a directory, expected a {what}") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not valid TOML ({' '.join(str(exc).split())})") from None

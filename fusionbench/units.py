@@ -26,6 +26,14 @@ ARCMIN = DEG / 60.0
 ARCSEC = DEG / 3600.0
 #: One hour, s.
 HOUR = 3600.0
+#: One millisecond, s.
+MILLISECOND = 1e-3
+#: One microsecond, s.
+MICROSECOND = 1e-6
+#: One nanosecond, s.
+NANOSECOND = 1e-9
+#: Angular rate 1 deg/s in rad/s.
+DEG_PER_S = DEG
 #: Angular rate 1 deg/h in rad/s.
 DEG_PER_H = DEG / HOUR
 #: Angle random walk 1 deg/sqrt(h) in rad/sqrt(s).
