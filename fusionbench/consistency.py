@@ -126,7 +126,8 @@ def window_bounds(imu: IMUData, window_s: float):
     """Sample ranges of the consecutive windows: ``(n, [(a, b), ...])``, window k holding samples ``a:b``.
 
     Each window holds ``n = round(window_s / dt)`` samples, so consecutive windows' last samples are ``n dt``
-    apart; the last partial window is dropped.
+    apart; the last partial window is dropped. A window of increments spans ``n dt``, one of rate samples
+    ``(n - 1) dt`` (its first sample is its initial state).
 
     Raises
     ------
