@@ -71,12 +71,24 @@ def _parser():
     a = sub.add_parser("align", parents=[debug],
                        help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
     a.add_argument("imu_file")
-    _site_arguments(a)
+    _record_arguments(a)
     a.add_argument("--method", default="coarse", help="method name (see list; named variants included) or "
                    "module:Class (default coarse)")
     a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
                    "(default: the method's own, shown by list)")
     a.add_argument("--json", action="store_true", help="print one JSON object")
+    k = sub.add_parser("consistency", parents=[debug],
+                       help="align consecutive windows of a recording without truth with each method and compare "
+                            "them (self-consistency, and the methods' agreement)")
+    k.add_argument("imu_file")
+    _record_arguments(k)
+    k.add_argument("--methods", default="coarse,coarse-i0,pid,adrc,kf",
+                   help="comma-separated method names (default coarse,coarse-i0,pid,adrc,kf)")
+    k.add_argument("--window", type=float, default=300.0, help="window length, s (default 300)")
+    k.add_argument("--imu", help="IMU noise model (a preset or an IMU spec .toml, as `identify` writes it): given to "
+                   "the methods that use one, and with it the report shows what the data allow (the attainable bound)")
+    k.add_argument("--out", default="consistency", help="output folder for consistency.json and consistency.png "
+                   "(default ./consistency)")
     r = sub.add_parser("run", parents=[debug],
                        help="Monte Carlo run of a scenario (a built-in name, 'all', or a .toml file)")
     r.add_argument("scenario")
@@ -129,11 +141,25 @@ def _overrides(args):
     return out
 
 
-def _site_arguments(p):
+def _record_arguments(p):
+    """The options of a command that reads a user's recording: its format and its site."""
+    p.add_argument("--format", help="the file's layout: a built-in (pyins, pyins-increment, kf-gins, fusionbench-csv) "
+                   "or a layout .toml (docs/layouts.md); default: by extension (.csv, .npz, .imu)")
     p.add_argument("--lat", type=float, help="latitude, deg (default: the file's header, for .imu; required for "
                    "other files)")
     p.add_argument("--lon", type=float, help="longitude, deg (default: the file's header, else 0)")
     p.add_argument("--height", type=float, help="height, m (default: the file's header, else 0)")
+
+
+def _read_record(args, min_samples=2):
+    """The recording ``args.imu_file`` (one run, SI, body RFU) and its meta, read by ``--format`` or by extension."""
+    if args.format is None:
+        from .imufiles import read_imu
+
+        return read_imu(args.imu_file, min_samples=min_samples)
+    from .layouts import layout_from_name_or_file, read_layout
+
+    return read_layout(args.imu_file, layout_from_name_or_file(args.format), min_samples=min_samples)
 
 
 def _site(args, meta):
@@ -193,12 +219,12 @@ def _method_notes(cls):
 
 
 def _cmd_align(args):
-    from .imufiles import IMUFileError, read_imu
+    from .imufiles import IMUFileError
 
     noise = None if args.imu is None else load_spec(args.imu)
     method = _named(args.method, lambda: load_method(args.method, imu=noise), group=GROUP)
     _site(args, {})  # what the command line gives is checked before the file is read
-    imu, meta = read_imu(args.imu_file)
+    imu, meta = _read_record(args)
     site = _site(args, meta)
     if imu.duration < method.min_duration_s:
         raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
@@ -223,6 +249,27 @@ def _cmd_align(args):
         model = res.imu_model
         print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))
         print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
+    return 0
+
+
+def _cmd_consistency(args):
+    from .consistency import consistency
+    from .consistency_report import summary_lines, write_consistency_report
+
+    methods = [m for m in args.methods.split(",") if m]
+    if not methods:
+        raise ValueError(f"--methods: expected comma-separated method names, found {args.methods!r}")
+    for spec in methods:  # each one builds, or one line names it, before the record is read
+        _named(spec, lambda: load_method(spec, imu=None if args.imu is None else load_spec(args.imu)), group=GROUP)
+    _site(args, {})
+    imu, meta = _read_record(args)
+    site = _site(args, meta)
+    res = consistency(imu, site, methods, window_s=args.window, imu_model=args.imu)  # a bar on a terminal
+    paths = write_consistency_report(res, Path(args.out))
+    print(f"{args.imu_file}: {imu.duration:.0f} s at {1 / imu.dt:g} Hz, site {np.degrees(site.lat):.4f} deg latitude")
+    for line in summary_lines(res):
+        print(line)
+    print(f"written: {', '.join(map(str, paths))}")
     return 0
 
 
@@ -411,6 +458,20 @@ def _quiet_stdout():
         pass
 
 
+def _signed_values(argv):
+    """``--site -41.3,174.8`` as ``--site=-41.3,174.8``: argparse takes a value that starts with '-' and is not one
+    plain number for an option (a southern latitude with a longitude would be refused)."""
+    out, k = [], 0
+    while k < len(argv):
+        if argv[k] == "--site" and k + 1 < len(argv) and argv[k + 1].startswith("-"):
+            out.append(f"--site={argv[k + 1]}")
+            k += 2
+        else:
+            out.append(argv[k])
+            k += 1
+    return out
+
+
 def _worker_ignores_sigint():
     """A worker process's start: SIGINT ignored (the parent handles a Ctrl-C and stops the workers)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -419,6 +480,7 @@ def _worker_ignores_sigint():
 def main(argv=None):
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); returns the exit status (0 done, 1 a check
     found a regression, 2 an error, 130 interrupted, 141 standard output closed)."""
+    argv = _signed_values(sys.argv[1:] if argv is None else [str(a) for a in argv])
     try:
         args = _parser().parse_args(argv)
     except SystemExit as done:  # --help, --version, or a usage error (one line already printed)
@@ -427,7 +489,8 @@ def main(argv=None):
     # joblib's resource tracker (a child process) warns about the semaphores of workers stopped by a Ctrl-C
     # while it shuts down; that is joblib's housekeeping, not a message for the user
     os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker")
-    commands = {"list": _cmd_list, "align": _cmd_align, "run": _cmd_run, "check": _cmd_check}
+    commands = {"list": _cmd_list, "align": _cmd_align, "consistency": _cmd_consistency, "run": _cmd_run,
+                "check": _cmd_check}
     try:
         # the workers leave a Ctrl-C to this process, which stops them: a worker interrupted inside a library's
         # clean-up would print its own traceback beside our one line
