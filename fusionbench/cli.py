@@ -330,7 +330,7 @@ def _cmd_run(args):
         if overrides:
             raise ValueError("--imu and --site replace one scenario's sensor and site, not those of 'all': name a "
                              "scenario (e.g. run twin --imu my_imu.toml --site 34.2,108.9,450)")
-        names = [n for n in scenarios.builtin_names() if not getattr(scenarios.get(n), "template", False)]
+        names = scenarios.builtin_names(templates=False)
     else:
         names = [args.scenario]
     scns = [scenarios.get(n, overrides) for n in names]  # validate every scenario before running any

@@ -326,9 +326,11 @@ def _parse_any(data, src, overrides=None):
     return _experiment(data.get("experiment", "alignment"), src).load(data, src)
 
 
-def builtin_names():
-    """Names of the built-in scenarios, sorted."""
-    return sorted(p.name[:-5] for p in resources.files(__name__).iterdir() if p.name.endswith(".toml"))
+def builtin_names(templates=True):
+    """Names of the built-in scenarios, sorted; ``templates=False`` leaves out the templates of a user's sensor
+    (``twin``: run only with ``--imu`` and ``--site``), which is what ``run all`` runs."""
+    names = sorted(p.name[:-5] for p in resources.files(__name__).iterdir() if p.name.endswith(".toml"))
+    return names if templates else [n for n in names if not getattr(get(n), "template", False)]
 
 
 def get(name_or_path, overrides=None) -> Scenario:
