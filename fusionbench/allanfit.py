@@ -30,7 +30,7 @@ Uncertainty: the 1-sigma uncertainty of each present coefficient is from the gen
 covariance ``(A^T C^-1 A)^-1`` of the present terms, multiplied by the reduced chi-square when that exceeds one
 (a model that does not fit the curve within its confidence intervals gets wider uncertainties); a coefficient's
 uncertainty is that of its square halved relatively (``sd(X) = sd(X^2) / (2 X)``). On simulated records the
-errors divided by these uncertainties have a standard deviation of 0.85 to 1.15.
+errors divided by these uncertainties have a standard deviation of about 0.85 to 1.2.
 """
 
 from __future__ import annotations

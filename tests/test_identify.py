@@ -15,6 +15,7 @@ holds the probability of any of the file's value checks failing by chance below 
 import itertools
 import json
 import math
+from pathlib import Path
 
 import allantools
 import numpy as np
@@ -300,3 +301,10 @@ def test_report_json_figure_and_summary(nb, tmp_path):
     assert all("deg/sqrt(h)" in s and "deg/h" in s and "+-" in s for s in axis_lines[:3])
     assert all("ug/sqrt(Hz)" in s and " ug" in s for s in axis_lines[3:])
     assert any("turn-on bias" in s and "datasheet" in s for s in summary)
+
+
+def test_the_page_quotes_the_gauss_markov_constants():
+    text = (Path(__file__).parents[1] / "docs" / "identify.md").read_text()
+    x_peak, adev_peak = allanfit.gm_peak()
+    assert f"{x_peak:.4f}" in text and f"{adev_peak:.4f}" in text
+    assert "identify.md" in (Path(__file__).parents[1] / "docs" / "scenarios.md").read_text()
