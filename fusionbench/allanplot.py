@@ -30,18 +30,45 @@ _TITLES = {"gyro": "Gyros: Allan deviation of the angular rate",
 
 
 def _label_at(f, term, grid, floor):
-    """Where to name a term on its line: clear of the data, near the bottom of the panel. A falling line (Q, N) is
-    named where it comes down to ``floor`` (or at its right end), a rising one (K, R) where it leaves ``floor``
-    (or at its left end), the flat B at its left end, where the curve is far above it."""
+    """Where to name a term on its line, clear of the data near the bottom of the panel: ``(tau, side)`` with
+    ``side`` -1 for the text left of the point, +1 right of it. A falling line (Q, N) is named where it comes down
+    to ``floor``, the text on its right; a rising one (K, R) where it leaves ``floor``, the text on its left; the
+    flat B at its left end, where the curve is far above it. A line that stays above or below ``floor`` is named
+    at the end of the measured taus, the text inwards."""
     y = f.term_adev(term, grid)
     slope = allanfit.SLOPES[term]
-    if slope < 0:
-        k = np.flatnonzero(y <= floor)
-        return float(grid[k[0]] if k.size else grid[-1])
-    if slope > 0:
-        k = np.flatnonzero(y >= floor)
-        return float(grid[k[0]] if k.size else grid[-1])
-    return float(grid[0])
+    if slope == 0:
+        return float(grid[0]), 1
+    k = np.flatnonzero(y <= floor if slope < 0 else y >= floor)
+    if k.size == 0:
+        return float(grid[-1]), -1
+    if k[0] == 0:
+        return float(grid[0]), 1
+    return float(grid[k[0]]), 1 if slope < 0 else -1
+
+
+def _unclash(ax, labels):
+    """Keep the labels inside the panel (a label past its left or right edge goes to the other side of its point,
+    and to the other side of the line) and move each up until it overlaps none of the ones before it."""
+    renderer = ax.figure.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    placed = []
+    for ann in labels:
+        box = ann.get_window_extent(renderer)
+        if box.x1 > frame.x1 or box.x0 < frame.x0:
+            dx, dy = ann.xyann
+            ann.xyann = (-dx, 3.0 if dy < 0 else -4.0)
+            ann.set_horizontalalignment("right" if dx > 0 else "left")
+            ann.set_verticalalignment("bottom" if dy < 0 else "top")
+            box = ann.get_window_extent(renderer)
+        for _ in range(10):
+            hit = [b for b in placed if box.overlaps(b)]
+            if not hit:
+                break
+            dx, dy = ann.xyann
+            ann.xyann = (dx, dy + (max(b.y1 for b in hit) - box.y0 + 2.0) * 72.0 / ax.figure.dpi)
+            box = ann.get_window_extent(renderer)
+        placed.append(box)
 
 
 def _plain_ticks(ax):
@@ -71,18 +98,21 @@ def _panel(ax, ident, sensor):
     ax.set_yscale("log")
     y_lo = lo_y / 5.0 if np.isfinite(lo_y) else 1.0
     ax.set_ylim(y_lo, max(hi_y * 1.5, 10.0 * y_lo))
+    labels = []
     for t in allanfit.TERMS:  # name each term once, on the axis where it is largest
         present = [j for j, f in enumerate(fits) if f.is_present(t)]
         if present:
             f = fits[max(present, key=lambda k: fits[k].value(t))]
             grid = np.geomspace(f.curve.tau[0], f.curve.tau[-1], 200)
-            x = _label_at(f, t, grid, 2.0 * y_lo * scale)
+            x, side = _label_at(f, t, grid, 2.0 * y_lo * scale)
             y = float(f.term_adev(t, np.array([x]))[0]) / scale
-            slope = allanfit.SLOPES[t]  # falling lines named right of the point, rising ones left: never crossing
-            ax.annotate(f"{t}: slope {_SLOPE_TEXT[t]}", (x, y), xytext=(-4 if slope > 0 else 4, 3 if slope else -4),
-                        textcoords="offset points", ha="right" if slope > 0 else "left",
-                        va="bottom" if slope else "top", fontsize=8, color="0.1", zorder=4,
-                        bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="0.7", lw=0.5, alpha=0.85))
+            above = allanfit.SLOPES[t] * side < 0  # the text on the side of the point away from the line
+            labels.append(ax.annotate(
+                f"{t}: slope {_SLOPE_TEXT[t]}", (x, y), xytext=(4 * side, 3 if above else -4),
+                textcoords="offset points", ha="left" if side > 0 else "right", va="bottom" if above else "top",
+                fontsize=8, color="0.1", zorder=4,
+                bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="0.7", lw=0.5, alpha=0.85)))
+    _unclash(ax, labels)
     _plain_ticks(ax)
     ax.grid(True, which="major", lw=0.5, alpha=0.5)
     ax.grid(True, which="minor", lw=0.3, alpha=0.25)
