@@ -28,7 +28,7 @@ import numpy as np
 
 from . import allan as allan_mod
 from . import allanfit, units
-from .imu import IMUSpec, spec_from_table
+from .imu import SPEC_SCALARS, IMUSpec, spec_from_table
 from .imudata import IMUData
 from .imufiles import atomic_open
 
@@ -37,7 +37,8 @@ __all__ = ["MIN_SAMPLES", "MIN_TAU_S", "UNITS", "ADEV_UNITS", "Term", "Identific
 
 #: Fewest samples a record must have.
 MIN_SAMPLES = 100
-#: The longest averaging time (a quarter of the record) must reach this, s: below it no bias term can show.
+#: The longest averaging time (the last octave of the sample interval within a quarter of the record) must reach
+#: this, s: below it no bias term can show.
 MIN_TAU_S = 10.0
 SENSORS = ("gyro", "accel")
 AXES = ("x", "y", "z")
@@ -159,15 +160,17 @@ class Identification:
     def gauss_markov(self, sensor):
         """The Gauss-Markov bias standing for the bias instability of ``sensor``: ``(sigma (3,), T, tau_floor)``,
         sigma in rad/s or m/s^2 (0 on an axis without B), the correlation time T (s) shared by the triad (the
-        error model has one per sensor: the geometric mean of the axes' ``tau_floor / x_peak``) and that mean floor
-        time (s); ``T`` and ``tau_floor`` are None when no axis shows B."""
+        error model has one per sensor: the geometric mean of the axes' ``tau_floor / x_peak``, within the range the
+        ``[imu]`` parser accepts) and that mean floor time (s); ``T`` and ``tau_floor`` are None when no axis shows
+        B."""
         fits = self.fits(sensor)
         sig = np.array([allanfit.gauss_markov(f.value("B"), f.tau_floor)[0] for f in fits])
         floors = [f.tau_floor for f in fits if f.is_present("B")]
         if not floors:
             return sig, None, None
         floor = float(np.exp(np.mean(np.log(floors))))
-        return sig, allanfit.gauss_markov(1.0, floor)[1], floor
+        lo, hi = SPEC_SCALARS[_KEYS[sensor]["tau"]][3:]
+        return sig, float(np.clip(allanfit.gauss_markov(1.0, floor)[1], lo, hi)), floor
 
     def quantum(self, sensor):
         """Increment per count of ``sensor`` (rad or m/s): ``sqrt(12) Q`` averaged over the axes that show Q (the
@@ -193,8 +196,7 @@ class Identification:
 
     def to_spec(self) -> IMUSpec:
         """The identified IMU as an IMUSpec: what :func:`write_spec_toml` writes, at full precision."""
-        return spec_from_table({k: v for k, v, _ in spec_table(self) if k != "description" or v},
-                               f"<identified {self.name}>")
+        return spec_from_table({k: v for k, v, _ in spec_table(self)}, f"<identified {self.name}>")
 
 
 def _phase_check(imu, run):
@@ -203,11 +205,13 @@ def _phase_check(imu, run):
     if not (isinstance(run, (int, np.integer)) and 0 <= run < imu.runs):
         raise ValueError(f"identify run: expected a run index in [0, {imu.runs - 1}], found {run!r}")
     n = imu.samples
-    longest = (n // allan_mod.STOP_RATIO) * imu.dt
+    m = allan_mod.octave_factors(n + 1)
+    longest = float(m[-1] * imu.dt) if m.size else 0.0
     if n < MIN_SAMPLES or longest < MIN_TAU_S:
         raise ValueError(f"identify: expected a static record of at least {MIN_SAMPLES} samples whose longest Allan "
-                         f"averaging time (a quarter of it) reaches {MIN_TAU_S:g} s, found {n} samples of "
-                         f"{imu.dt:.6g} s ({n * imu.dt:.6g} s, longest averaging time {longest:.6g} s)")
+                         f"averaging time (the last octave within a quarter of the record) reaches {MIN_TAU_S:g} s, "
+                         f"found {n} samples of {imu.dt:.6g} s ({n * imu.dt:.6g} s, longest averaging time "
+                         f"{longest:.6g} s)")
 
 
 def identify(imu: IMUData, *, name="identified", source="", run=0) -> Identification:

@@ -202,15 +202,25 @@ def test_a_rate_record_gives_what_its_increment_record_gives():
                 assert a.present == b.present and b.value == pytest.approx(a.value, rel=1e-6), (s, j, t)
 
 
-@pytest.mark.parametrize("n, dt, found", [(99, 0.1, "found 99 samples"), (300, 0.1, "longest averaging time 7.5 s"),
-                                          (2000, 0.001, "longest averaging time 0.5 s")])
+@pytest.mark.parametrize("n, dt, found", [(99, 0.1, "found 99 samples of 0.1 s (9.9 s, longest averaging time 1.6 s)"),
+                                          (511, 0.1, "found 511 samples of 0.1 s (51.1 s, longest averaging time 6.4 s)"),
+                                          (2000, 0.001, "longest averaging time 0.256 s")])
 def test_a_record_too_short_is_one_clear_error(n, dt, found):
+    # octaves of dt up to a quarter of the record: 10 s at 0.1 s is 128 dt, so 4 x 128 = 512 samples at least
     t = (np.arange(n) + 1) * dt
     rec = imudata.IMUData(t, np.zeros((n, 3)), np.tile([0.0, 0.0, 9.8], (n, 1)), "rate")
     with pytest.raises(ValueError, match=r"expected a static record of at least 100 samples whose longest Allan "
-                                         r"averaging time \(a quarter of it\) reaches 10 s") as err:
+                                         r"averaging time \(the last octave within a quarter of the record\) reaches "
+                                         r"10 s") as err:
         identify.identify(rec)
     assert found in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_shortest_record_is_identified():
+    rec = _record(512, {"white": (GYRO_N,) * 3}, {"white": (ACCEL_N,) * 3}, 6)
+    ident = identify.identify(rec)
+    assert ident.fits("gyro")[0].curve.tau[-1] == pytest.approx(12.8)
+    assert all(ident.term("gyro", j, "N").present for j in range(3))
 
 
 def test_not_a_record_is_refused():
