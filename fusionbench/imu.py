@@ -32,8 +32,8 @@ from . import fields, units
 from .imudata import IMUData
 
 __all__ = ["SensorErrors", "IMUSpec", "NoiseSchedule", "VelocityReferenceSpec",
-           "PRESETS", "simulate", "simulate_chunks", "simulate_vref", "run_seed_sequence",
-           "spec_from_table", "schedules_from_list", "load_spec", "spec_field", "near"]
+           "PRESETS", "SPEC_OVERRIDES", "SPEC_SCALARS", "simulate", "simulate_chunks", "simulate_vref",
+           "run_seed_sequence", "spec_from_table", "schedules_from_list", "load_spec", "spec_field", "near"]
 
 # stream indices inside a run's SeedSequence
 _CONST, _G_WHITE, _A_WHITE, _G_GM, _A_GM, _G_RW, _A_RW, _VREF = range(8)
@@ -185,6 +185,8 @@ PRESETS = {
                       1.0, 0.1, 300.0, 50.0, 100.0, 300.0, instab_dph=0.5, instab_ug=50.0, tau=600.0),
     "mems": _spec("mems", "MEMS consumer grade: 10 deg/h, 0.3 deg/sqrt(h), 2 mg, 100 ug/sqrt(Hz)",
                   10.0, 0.3, 2000.0, 100.0, 1000.0, 1000.0, instab_dph=5.0, instab_ug=200.0, tau=300.0),
+    "ideal": _spec("ideal", "no errors: the start of a spec that gives every figure itself (fusionbench identify "
+                   "writes one)", 0.0, 0.0, 0.0, 0.0),
 }
 
 
@@ -199,13 +201,29 @@ SPEC_OVERRIDES = {
     "accel_bias_sigma_ug": ("accel", "bias_sigma", units.UG, 0.0),
     "vrw_ug_rthz": ("accel", "white", units.UG_PER_SQRT_HZ, 0.0),
     "accel_scale_ppm": ("accel", "scale", units.PPM, -1e5),
+    "gyro_instability_dph": ("gyro", "instability", units.DEG_PER_H, 0.0),
+    "rrw_dph_rth": ("gyro", "random_walk", units.DEG_PER_H_SQRT_H, 0.0),
+    "accel_instability_ug": ("accel", "instability", units.UG, 0.0),
+    "accel_rw_ug_rts": ("accel", "random_walk", units.UG_PER_SQRT_S, 0.0),
 }
 #: Largest magnitude accepted for each override (same units as its key): a gyro bias of 3600 deg/h is
 #: one degree per second, an accelerometer bias of 1e5 ug a tenth of g.
 _OVERRIDE_MAX = {"gyro_bias_dph": 3600.0, "gyro_bias_sigma_dph": 3600.0, "arw_dpsh": 100.0, "gyro_scale_ppm": 1e5,
-                 "accel_bias_ug": 1e5, "accel_bias_sigma_ug": 1e5, "vrw_ug_rthz": 1e5, "accel_scale_ppm": 1e5}
+                 "accel_bias_ug": 1e5, "accel_bias_sigma_ug": 1e5, "vrw_ug_rthz": 1e5, "accel_scale_ppm": 1e5,
+                 "gyro_instability_dph": 3600.0, "rrw_dph_rth": 3600.0, "accel_instability_ug": 1e5,
+                 "accel_rw_ug_rts": 1e5}
+#: Keys of an ``[imu]`` table that set a figure shared by a triad's three axes (a scalar of SensorErrors), in the
+#: unit of the key: key -> (sensor, SensorErrors field, unit factor to SI, lowest, highest value allowed). The
+#: correlation time is the Gauss-Markov bias instability's; the quantum is the increment per count (an angle of
+#: 3600 arcsec is one degree; a velocity of 1 m/s per count is far beyond any accelerometer).
+SPEC_SCALARS = {
+    "gyro_tau_s": ("gyro", "tau", 1.0, 0.001, 1e8),
+    "accel_tau_s": ("accel", "tau", 1.0, 0.001, 1e8),
+    "gyro_quantum_arcsec": ("gyro", "quantum", units.ARCSEC, 0.0, 3600.0),
+    "accel_quantum_mps": ("accel", "quantum", 1.0, 0.0, 1.0),
+}
 #: Keys of an ``[imu]`` table.
-SPEC_KEYS = ("preset", "random", "schedule", "name", "description", *SPEC_OVERRIDES)
+SPEC_KEYS = ("preset", "random", "schedule", "name", "description", *SPEC_OVERRIDES, *SPEC_SCALARS)
 _SENSORS = ("gyro", "accel")
 
 
@@ -237,7 +255,8 @@ def spec_from_table(d, src="<imu>", label="imu"):
 
     Keys: ``preset`` (a key of :data:`PRESETS`, default "navigation"), overrides of the preset in
     customary units (:data:`SPEC_OVERRIDES`: ``gyro_bias_dph``, ``arw_dpsh`` (deg/sqrt(h)), ``accel_bias_ug``,
-    ``vrw_ug_rthz`` (ug/sqrt(Hz)), ..., each one number or three for the body axes x, y, z), ``random``
+    ``vrw_ug_rthz`` (ug/sqrt(Hz)), ..., each one number or three for the body axes x, y, z; :data:`SPEC_SCALARS`:
+    the instability's correlation times ``gyro_tau_s``, ``accel_tau_s`` and the quanta, one number each), ``random``
     (false keeps only the deterministic errors), ``schedule`` (noise-PSD factors over time windows),
     ``name`` and ``description``. ``src`` names the file in error messages, ``label`` the table.
 
@@ -258,6 +277,10 @@ def spec_from_table(d, src="<imu>", label="imu"):
         if key in d:
             values = np.multiply(fields.vector(d, key, src, lo=lo, hi=_OVERRIDE_MAX[key], label=f"{label}.{key}"), factor)
             sensors[sensor] = replace(sensors[sensor], **{name: values})
+    for key, (sensor, name, factor, lo, hi) in SPEC_SCALARS.items():
+        if key in d:
+            value = fields.number(d, key, src, lo=lo, hi=hi, label=f"{label}.{key}") * factor
+            sensors[sensor] = replace(sensors[sensor], **{name: value})
     spec = replace(spec, gyro=sensors["gyro"], accel=sensors["accel"],
                    schedules=schedules_from_list(d.get("schedule", []), src, f"{label}.schedule"),
                    name=fields.string(d, "name", src, spec.name, label=f"{label}.name"),

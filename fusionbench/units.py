@@ -40,6 +40,8 @@ DEG_PER_H = DEG / HOUR
 DEG_PER_SQRT_H = DEG / math.sqrt(HOUR)
 #: Rate random walk 1 deg/h/sqrt(h) in rad/s/sqrt(s).
 DEG_PER_H_SQRT_H = DEG_PER_H / math.sqrt(HOUR)
+#: Rate ramp 1 deg/h/h in rad/s^2.
+DEG_PER_H_PER_H = DEG_PER_H / HOUR
 #: Specific force 1 g in m/s^2.
 G = G0
 #: Specific force 1 micro-g in m/s^2.
@@ -48,6 +50,10 @@ UG = 1e-6 * G0
 MG = 1e-3 * G0
 #: Velocity random walk 1 ug/sqrt(Hz) in m/s^2/sqrt(Hz) = m/s/sqrt(s).
 UG_PER_SQRT_HZ = UG
+#: Acceleration random walk 1 ug/sqrt(s) in m/s^2/sqrt(s).
+UG_PER_SQRT_S = UG
+#: Acceleration ramp 1 ug/s in m/s^3.
+UG_PER_S = UG
 #: Parts per million, dimensionless.
 PPM = 1e-6
 #: Velocity random walk 1 m/s/sqrt(h) in m/s/sqrt(s).

@@ -302,12 +302,17 @@ def test_preset_table_is_the_presets():
 def test_override_units_are_the_key_suffixes_the_page_names():
     rows = _rows(SECTIONS["Overrides in datasheet units"])
     unit_of = {"_dph": ("deg/h", units.DEG_PER_H), "_dpsh": ("deg/sqrt(h)", units.DEG_PER_SQRT_H),
-               "_ppm": ("ppm", units.PPM), "_ug": ("ug", units.UG), "_ug_rthz": ("ug/sqrt(Hz)", units.UG_PER_SQRT_HZ)}
-    assert set(rows) == set(imu.SPEC_OVERRIDES)
-    for key, (_, _, factor, _) in imu.SPEC_OVERRIDES.items():
+               "_dph_rth": ("deg/h/sqrt(h)", units.DEG_PER_H_SQRT_H), "_ppm": ("ppm", units.PPM),
+               "_ug": ("ug", units.UG), "_ug_rthz": ("ug/sqrt(Hz)", units.UG_PER_SQRT_HZ),
+               "_ug_rts": ("ug/sqrt(s)", units.UG_PER_SQRT_S), "_s": ("s", 1.0), "_arcsec": ("arcsec", units.ARCSEC),
+               "_mps": ("m/s", 1.0)}
+    assert set(rows) == set(imu.SPEC_OVERRIDES) | set(imu.SPEC_SCALARS)
+    factors = {**{k: v[2] for k, v in imu.SPEC_OVERRIDES.items()}, **{k: v[2] for k, v in imu.SPEC_SCALARS.items()}}
+    for key, factor in factors.items():
         suffix = next(s for s in sorted(unit_of, key=len, reverse=True) if key.endswith(s))
         text, value = unit_of[suffix]
         assert rows[key][1] == text and factor == value, key
+        assert rows[key][0] == ("number" if key in imu.SPEC_SCALARS else "3-vector"), key
 
 
 def test_platform_groups_table_is_the_model():

@@ -1,0 +1,445 @@
+"""Noise identification of an IMU from one static record: the Allan deviation of each axis (:mod:`fusionbench.allan`),
+the IEEE-952 terms fitted to it (:mod:`fusionbench.allanfit`), and an IMU spec made of what was identified.
+
+A static record shows the noise: quantisation Q, angle/velocity random walk N, bias instability B, rate/acceleration
+random walk K and rate ramp R, per body axis (x right, y forward, z up). It does not show scale factors or axis
+misalignment (nothing moves), nor the turn-on bias: the mean of the record is the earth rate and gravity plus the
+bias, with an unknown heading, and one record is one draw of the bias. The spec (:meth:`Identification.to_spec`,
+:func:`write_spec_toml`) starts from the error-free preset ``ideal`` and sets the white noise (N), the random walk
+(K), a first-order Gauss-Markov bias standing for B (:func:`fusionbench.allanfit.gauss_markov`: its Allan deviation
+peaks where the fitted curve has its minimum, as high as the flicker floor 0.664 B) and the quantum
+(``sqrt(12) Q``, the increment per count whose rounding error has Allan coefficient Q). The per-run bias sigma is a
+placeholder, B (or, where no B is seen, the bias instability the lowest measured deviation allows): replace it
+with the datasheet's bias repeatability. The rate ramp has no counterpart in the error model and is reported only.
+
+Entry points: :func:`identify` (the numbers), :func:`summary` (lines to print), :func:`write_spec_toml`,
+:func:`write_identify_report` (identify.json and allan.png) and :func:`run_identify` (all of it, for the command
+line).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import allan as allan_mod
+from . import allanfit, units
+from .imu import SPEC_SCALARS, IMUSpec, spec_from_table
+from .imudata import IMUData
+from .imufiles import atomic_open
+
+__all__ = ["MIN_SAMPLES", "MIN_TAU_S", "UNITS", "ADEV_UNITS", "Term", "Identification", "identify", "summary",
+           "spec_table", "write_spec_toml", "write_identify_report", "run_identify"]
+
+#: Fewest samples a record must have.
+MIN_SAMPLES = 100
+#: The longest averaging time (the last octave of the sample interval within a quarter of the record) must reach
+#: this, s: below it no bias term can show.
+MIN_TAU_S = 10.0
+SENSORS = ("gyro", "accel")
+AXES = ("x", "y", "z")
+#: Units of each term: sensor -> term -> (SI unit, datasheet unit, SI value of one datasheet unit).
+UNITS = {
+    "gyro": {"Q": ("rad", "arcsec", units.ARCSEC), "N": ("rad/sqrt(s)", "deg/sqrt(h)", units.DEG_PER_SQRT_H),
+             "B": ("rad/s", "deg/h", units.DEG_PER_H), "K": ("rad/s/sqrt(s)", "deg/h/sqrt(h)", units.DEG_PER_H_SQRT_H),
+             "R": ("rad/s^2", "deg/h/h", units.DEG_PER_H_PER_H)},
+    "accel": {"Q": ("m/s", "m/s", 1.0),  # a velocity quantum is quoted in m/s, SI already
+              "N": ("m/s/sqrt(s)", "ug/sqrt(Hz)", units.UG_PER_SQRT_HZ), "B": ("m/s^2", "ug", units.UG),
+              "K": ("m/s^2/sqrt(s)", "ug/sqrt(s)", units.UG_PER_SQRT_S), "R": ("m/s^3", "ug/s", units.UG_PER_S)},
+}
+#: Unit of the Allan deviation in the figure and the summary: sensor -> (name, SI value of one unit).
+ADEV_UNITS = {"gyro": ("deg/h", units.DEG_PER_H), "accel": ("ug", units.UG)}
+#: SI unit of the Allan deviation.
+ADEV_SI = {"gyro": "rad/s", "accel": "m/s^2"}
+#: Relative deviation of the mean specific force from g beyond which the summary doubts the record is static.
+STATIC_TOLERANCE = 0.02
+#: Quantum (increment per count) over the Allan quantisation coefficient Q: a rounding error uniform over one count
+#: has variance quantum^2 / 12, and white phase noise of variance Q^2 has Allan variance 3 Q^2 / tau^2.
+QUANTUM_PER_Q = math.sqrt(12.0)
+SPEC_FILE, JSON_FILE, FIGURE_FILE = "imu_spec.toml", "identify.json", "allan.png"
+#: [imu] keys written for each sensor: what -> key.
+_KEYS = {"gyro": {"N": "arw_dpsh", "K": "rrw_dph_rth", "instability": "gyro_instability_dph", "tau": "gyro_tau_s",
+                  "quantum": "gyro_quantum_arcsec", "bias_sigma": "gyro_bias_sigma_dph"},
+         "accel": {"N": "vrw_ug_rthz", "K": "accel_rw_ug_rts", "instability": "accel_instability_ug",
+                   "tau": "accel_tau_s", "quantum": "accel_quantum_mps", "bias_sigma": "accel_bias_sigma_ug"}}
+
+
+@dataclass(frozen=True)
+class Term:
+    """One fitted term of one axis.
+
+    Attributes
+    ----------
+    sensor : {"gyro", "accel"}
+    name : {"Q", "N", "B", "K", "R"}
+    present : bool
+        Whether the fit found it significant.
+    value, sigma : float
+        Coefficient and its 1-sigma uncertainty, SI (:data:`UNITS`); 0 when absent.
+    """
+
+    sensor: str
+    name: str
+    present: bool
+    value: float
+    sigma: float
+
+    @property
+    def unit_si(self):
+        return UNITS[self.sensor][self.name][0]
+
+    @property
+    def unit(self):
+        """Datasheet unit."""
+        return UNITS[self.sensor][self.name][1]
+
+    @property
+    def datasheet(self):
+        """Coefficient in the datasheet unit."""
+        return self.value / UNITS[self.sensor][self.name][2]
+
+    @property
+    def datasheet_sigma(self):
+        return self.sigma / UNITS[self.sensor][self.name][2]
+
+
+@dataclass(frozen=True)
+class Identification:
+    """The noise of one IMU record, per sensor and body axis.
+
+    Attributes
+    ----------
+    name : str
+        The IMU's name (the spec's).
+    source : str
+        Where the record comes from (a file name), or "".
+    dt : float
+        Sample interval, s.
+    samples : int
+        Number of samples.
+    kind : {"increment", "rate"}
+    run : int
+        Which run of the IMUData.
+    gyro, accel : tuple of 3 allanfit.AllanFit
+        The Allan deviation and the fitted terms of axes x, y, z (rad/s, m/s^2).
+    mean_rate : float
+        Magnitude of the mean angular rate, rad/s (earth rate plus biases on a static base).
+    mean_specific_force : float
+        Magnitude of the mean specific force, m/s^2 (about g on a static base).
+    """
+
+    name: str
+    source: str
+    dt: float
+    samples: int
+    kind: str
+    run: int
+    gyro: tuple
+    accel: tuple
+    mean_rate: float
+    mean_specific_force: float
+
+    @property
+    def duration(self):
+        """Length of the record, s."""
+        return self.samples * self.dt
+
+    def fits(self, sensor):
+        """The three AllanFit of ``sensor``."""
+        return self.gyro if sensor == "gyro" else self.accel
+
+    def term(self, sensor, axis, name):
+        """The :class:`Term` ``name`` of ``sensor`` on ``axis`` (0-2 or "x", "y", "z")."""
+        f = self.fits(sensor)[AXES.index(axis) if isinstance(axis, str) else axis]
+        return Term(sensor, name, f.is_present(name), f.value(name), f.sigma(name))
+
+    def gauss_markov(self, sensor):
+        """The Gauss-Markov bias standing for the bias instability of ``sensor``: ``(sigma (3,), T, tau_floor)``,
+        sigma in rad/s or m/s^2 (0 on an axis without B), the correlation time T (s) shared by the triad (the
+        error model has one per sensor: the geometric mean of the axes' ``tau_floor / x_peak``, within the range the
+        ``[imu]`` parser accepts) and that mean floor time (s); ``T`` and ``tau_floor`` are None when no axis shows
+        B."""
+        fits = self.fits(sensor)
+        sig = np.array([allanfit.gauss_markov(f.value("B"), f.tau_floor)[0] for f in fits])
+        floors = [f.tau_floor for f in fits if f.is_present("B")]
+        if not floors:
+            return sig, None, None
+        floor = float(np.exp(np.mean(np.log(floors))))
+        lo, hi = SPEC_SCALARS[_KEYS[sensor]["tau"]][3:]
+        return sig, float(np.clip(allanfit.gauss_markov(1.0, floor)[1], lo, hi)), floor
+
+    def quantum(self, sensor):
+        """Increment per count of ``sensor`` (rad or m/s): ``sqrt(12) Q`` averaged over the axes that show Q (the
+        error model has one per sensor), or 0."""
+        qs = [f.value("Q") for f in self.fits(sensor) if f.is_present("Q")]
+        return QUANTUM_PER_Q * float(np.mean(qs)) if qs else 0.0
+
+    def bias_bound(self, sensor):
+        """``(values (3,), measured (3,) bool)``: B where the fit shows it, else the largest B the record allows,
+        the lowest measured deviation over ``sqrt(2 ln2 / pi)`` (SI)."""
+        fits = self.fits(sensor)
+        measured = np.array([f.is_present("B") for f in fits])
+        bound = np.array([f.curve.adev.min() / math.sqrt(allanfit.FLICKER) for f in fits])
+        return np.where(measured, [f.value("B") for f in fits], bound), measured
+
+    def static_note(self):
+        """One line doubting that the record is static, or ""."""
+        off = abs(self.mean_specific_force / units.G0 - 1.0)
+        if off > STATIC_TOLERANCE:
+            return (f"note: the mean specific force is {self.mean_specific_force:.4g} m/s^2, {100 * off:.1f} % off g: "
+                    f"is the record static? The Allan deviation of a moving record is not the sensor's noise")
+        return ""
+
+    def to_spec(self) -> IMUSpec:
+        """The identified IMU as an IMUSpec: what :func:`write_spec_toml` writes, at full precision."""
+        return spec_from_table({k: v for k, v, _ in spec_table(self)}, f"<identified {self.name}>")
+
+
+def _phase_check(imu, run):
+    if not isinstance(imu, IMUData):
+        raise ValueError(f"identify: expected an IMUData record, found {type(imu).__name__}")
+    if not (isinstance(run, (int, np.integer)) and 0 <= run < imu.runs):
+        raise ValueError(f"identify run: expected a run index in [0, {imu.runs - 1}], found {run!r}")
+    n = imu.samples
+    m = allan_mod.octave_factors(n + 1)
+    longest = float(m[-1] * imu.dt) if m.size else 0.0
+    if n < MIN_SAMPLES or longest < MIN_TAU_S:
+        raise ValueError(f"identify: expected a static record of at least {MIN_SAMPLES} samples whose longest Allan "
+                         f"averaging time (the last octave within a quarter of the record) reaches {MIN_TAU_S:g} s, "
+                         f"found {n} samples of {imu.dt:.6g} s ({n * imu.dt:.6g} s, longest averaging time "
+                         f"{longest:.6g} s)")
+
+
+def identify(imu: IMUData, *, name="identified", source="", run=0) -> Identification:
+    """Identify the noise terms of each gyro and accelerometer axis of one static record.
+
+    Parameters
+    ----------
+    imu : IMUData
+        The record, kind "increment" (exact) or "rate" (each sample the mean over its interval), body frame.
+    name : str
+        The IMU's name, written into the spec.
+    source : str
+        Where the record comes from (a file name), for the spec's comments and the report.
+    run : int
+        Which run of ``imu``.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    ValueError
+        One line: not an IMUData, a bad run, or a record too short (fewer than :data:`MIN_SAMPLES` samples, or a
+        longest averaging time below :data:`MIN_TAU_S`).
+    """
+    _phase_check(imu, run)
+    curves = allan_mod.allan(imu, run)
+    g, a = imu.rates()
+    fits = {s: tuple(allanfit.fit(c, imu.dt) for c in getattr(curves, s)) for s in SENSORS}
+    return Identification(str(name), str(source), imu.dt, imu.samples, imu.kind, int(run), fits["gyro"], fits["accel"],
+                          float(np.linalg.norm(g[run].mean(axis=0))), float(np.linalg.norm(a[run].mean(axis=0))))
+
+
+# ------------------------------------------------------------------------------------------------ the spec
+
+
+def _fmt(v):
+    return f"{v:.6g}"
+
+
+def _vec(values):
+    return "[" + ", ".join(_fmt(v) for v in values) + "]"
+
+
+def spec_table(ident: Identification):
+    """The ``[imu]`` table of the identified spec: a list of ``(key, value, comment)``, values in the keys' units
+    (full precision), only the keys of what was identified (plus the preset, name, description and the
+    placeholder bias sigmas)."""
+    x_peak, adev_peak = allanfit.gm_peak()
+    where = f" from {ident.source}" if ident.source else ""
+    rows = [("preset", "ideal", "no errors but those below: scale factors, misalignment and the fixed bias cannot "
+                                "be seen in a static record"),
+            ("name", ident.name, ""),
+            ("description", f"identified{where} by fusionbench identify: {ident.samples} samples of {ident.dt:.6g} s "
+                            f"({ident.duration / 3600:.3g} h), Allan deviation and IEEE-952 fit", "")]
+    for s in SENSORS:
+        keys, terms = _KEYS[s], {t: [ident.term(s, j, t) for j in range(3)] for t in allanfit.TERMS}
+        for t in ("N", "K"):
+            if any(x.present for x in terms[t]):
+                factor = UNITS[s][t][2]
+                rows.append((keys[t], [x.value / factor for x in terms[t]],
+                             f"{t}, Allan slope {_slope(t)}: +- {_vec(x.datasheet_sigma for x in terms[t])} "
+                             f"{UNITS[s][t][1]} (1 sigma); 0 = not significant"))
+        sig, T, floor = ident.gauss_markov(s)
+        if T is not None:
+            factor = UNITS[s]["B"][2]
+            rows.append((keys["instability"], [v / factor for v in sig],
+                         f"Gauss-Markov sigma for B = {_vec(x.datasheet for x in terms['B'])} {UNITS[s]['B'][1]}: "
+                         f"0.664 B / {adev_peak:.4f}, its Allan peak at the flicker floor"))
+            rows.append((keys["tau"], T, f"s: the fitted curve's minimum at {floor:.4g} s (geometric mean over the "
+                                         f"axes) / {x_peak:.4f}, where a Gauss-Markov's Allan deviation peaks"))
+        q = ident.quantum(s)
+        if q > 0:
+            factor = UNITS[s]["Q"][2]
+            rows.append((keys["quantum"], q / factor,
+                         f"{UNITS[s]['Q'][1]} per count = sqrt(12) Q, Q = {_vec(x.datasheet for x in terms['Q'])} "
+                         f"{UNITS[s]['Q'][1]} (mean of the axes that show it)"))
+        bias, measured = ident.bias_bound(s)
+        factor = UNITS[s]["B"][2]
+        rows.append((keys["bias_sigma"], [v / factor for v in bias],
+                     "PLACEHOLDER, replace with the datasheet's bias repeatability: a static record cannot show the "
+                     "turn-on bias; this is B" + ("" if measured.all() else
+                                                  " (the largest B the record allows where B is not seen)")))
+    return rows
+
+
+def _slope(t):
+    return {"Q": "-1", "N": "-1/2", "B": "0", "K": "+1/2", "R": "+1"}[t]
+
+
+def write_spec_toml(ident: Identification, path):
+    """Write the identified spec as an IMU spec TOML (an ``[imu]`` table, :func:`fusionbench.imu.load_spec` reads
+    it), atomically, each number commented with where it comes from. Returns the path.
+
+    Raises
+    ------
+    ValueError
+        A figure beyond what the ``[imu]`` parser accepts (nothing written).
+    """
+    rows = spec_table(ident)
+    ident.to_spec()  # the parser accepts every figure, or nothing is written
+    lines = ["# IMU spec identified by fusionbench identify from a static record (overlapping Allan deviation and",
+             "# a least-squares fit of the IEEE-952 terms; see docs/identify.md). Values per body axis x, y, z.",
+             f"# record: {ident.source or '(not named)'}, run {ident.run}, {ident.samples} samples of {ident.dt:.6g} s "
+             f"({ident.duration:.6g} s), kind {ident.kind}",
+             "[imu]"]
+    for key, value, comment in rows:
+        text = json.dumps(value) if isinstance(value, str) else (_vec(value) if isinstance(value, list) else _fmt(value))
+        lines.append(f"{key} = {text}" + (f"  # {comment}" if comment else ""))
+    for s in SENSORS:
+        ramps = [ident.term(s, j, "R") for j in range(3)]
+        if any(r.present for r in ramps):
+            lines.append(f"# {s} rate ramp R = {_vec(r.datasheet for r in ramps)} {UNITS[s]['R'][1]}: the error model "
+                         f"has no ramp, it is not in this spec")
+    with atomic_open(path) as fh:
+        fh.write("\n".join(lines) + "\n")
+    return Path(path)
+
+
+# ------------------------------------------------------------------------------------------------ the report
+
+
+def _axis_json(f: allanfit.AllanFit, sensor):
+    c = f.curve
+    terms = {}
+    for t in allanfit.TERMS:
+        si, ds, factor = UNITS[sensor][t]
+        present = f.is_present(t)
+        terms[t] = {"present": present, "adev_slope": allanfit.SLOPES[t],
+                    "si": f.value(t) if present else None, "si_sigma": f.sigma(t) if present else None, "si_unit": si,
+                    "datasheet": f.value(t) / factor if present else None,
+                    "datasheet_sigma": f.sigma(t) / factor if present else None, "datasheet_unit": ds}
+    return {"tau_s": c.tau.tolist(), "adev": c.adev.tolist(), "adev_lo": c.lo.tolist(), "adev_hi": c.hi.tolist(),
+            "edf": c.edf.tolist(), "noise_alpha": c.alpha.tolist(), "adev_unit": ADEV_SI[sensor],
+            "tau_floor_s": f.tau_floor, "chi2": f.chi2, "dof": f.dof, "terms": terms}
+
+
+def report_dict(ident: Identification):
+    """Everything of the identification as a JSON-able dict (SI and datasheet units, uncertainties 1 sigma)."""
+    x_peak, adev_peak = allanfit.gm_peak()
+    out = {"name": ident.name, "source": ident.source,
+           "record": {"samples": ident.samples, "dt_s": ident.dt, "duration_s": ident.duration, "kind": ident.kind,
+                      "run": ident.run, "mean_rate_dph": ident.mean_rate / units.DEG_PER_H,
+                      "mean_specific_force_mps2": ident.mean_specific_force, "static_note": ident.static_note()},
+           "method": {"allan": "overlapping Allan deviation (allantools.oadev) of the cumulative increments at octave "
+                               "taus up to a quarter of the record; 1-sigma chi-square intervals with Greenhall's "
+                               "equivalent degrees of freedom",
+                      "model": "sigma^2(tau) = 3 Q^2/tau^2 + N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 + R^2 tau^2/2",
+                      "fit": "generalised least squares of the Allan variance, non-negative, with the estimates' "
+                             "covariance (edf, octave correlations) from the model; terms: the subset minimising the log-space deviance + "
+                             f"{allanfit.SIGNIFICANCE:g}^2 per term",
+                      "uncertainty": "1 sigma from the least-squares covariance, scaled by the reduced chi-square "
+                                     "when above 1",
+                      "significance_sigma": allanfit.SIGNIFICANCE,
+                      "gauss_markov_peak": {"tau_over_T": x_peak, "adev_over_sigma": adev_peak}},
+           "turn_on_bias": "not observable in one static record: the spec's bias sigma is a placeholder (B)"}
+    for s in SENSORS:
+        sig, T, floor = ident.gauss_markov(s)
+        out[s] = {"axes": {ax: _axis_json(f, s) for ax, f in zip(AXES, ident.fits(s))},
+                  "gauss_markov": {"sigma_si": sig.tolist(), "sigma_datasheet": (sig / UNITS[s]["B"][2]).tolist(),
+                                   "tau_s": T, "tau_floor_s": floor},
+                  "quantum_si": ident.quantum(s)}
+    out["spec"] = {k: v for k, v, _ in spec_table(ident)}
+    return out
+
+
+def write_identify_report(ident: Identification, out_dir):
+    """Write ``identify.json`` (:func:`report_dict`, no NaN) and the figure ``allan.png`` into ``out_dir`` (created
+    if needed), each atomically. Returns the two paths."""
+    from .allanplot import allan_figure  # matplotlib only when a figure is drawn
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_open(out / JSON_FILE) as fh:
+        json.dump(report_dict(ident), fh, indent=1, allow_nan=False)
+        fh.write("\n")
+    allan_figure(ident, out / FIGURE_FILE)
+    return [out / JSON_FILE, out / FIGURE_FILE]
+
+
+def _pm(value, sigma):
+    """``value +- sigma`` rounded to the uncertainty's second significant digit."""
+    if not (sigma > 0 and np.isfinite(sigma)):
+        return f"{value:.4g}"
+    digits = max(0, 1 - int(math.floor(math.log10(sigma))))
+    if digits > 6 or abs(value) >= 1e6:
+        return f"{value:.3g} +- {sigma:.2g}"
+    return f"{value:.{digits}f} +- {sigma:.{digits}f}"
+
+
+def summary(ident: Identification):
+    """Lines for the command line: the record, one line per sensor axis with the present terms in datasheet units
+    (+- 1 sigma), and what the spec cannot hold."""
+    f0 = ident.gyro[0].curve
+    lines = [f"{ident.name}: {ident.samples} samples of {ident.dt:.6g} s ({ident.duration / 3600:.3g} h, {ident.kind}); "
+             f"Allan deviation at {f0.tau.size} taus {f0.tau[0]:.3g}-{f0.tau[-1]:.4g} s, IEEE-952 terms +- 1 sigma "
+             f"(absent: below {allanfit.SIGNIFICANCE:g} sigma)"]
+    for s in SENSORS:
+        for j, ax in enumerate(AXES):
+            terms = [ident.term(s, j, t) for t in allanfit.TERMS]
+            shown = [f"{t.name} {_pm(t.datasheet, t.datasheet_sigma)} {t.unit}" for t in terms if t.present]
+            absent = [t.name for t in terms if not t.present]
+            lines.append(f"{s:5s} {ax}: " + ("; ".join(shown) or "no term") + (f"  ({', '.join(absent)} absent)"
+                                                                              if absent else ""))
+    lines.append("turn-on bias: not observable in one static record (the mean mixes it with earth rate and gravity); "
+                 "the spec's bias sigmas are placeholders (B): replace them with the datasheet's bias repeatability")
+    if any(ident.term(s, j, "R").present for s in SENSORS for j in range(3)):
+        lines.append("rate ramp: the error model has none; reported, not in the spec")
+    note = ident.static_note()
+    return lines + ([note] if note else [])
+
+
+def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
+    """Identify ``imu`` and write into ``out_dir``: the spec ``imu_spec.toml``, ``identify.json`` and ``allan.png``.
+
+    Returns
+    -------
+    list of str
+        :func:`summary` followed by one line naming the files written: what the command line prints.
+
+    Raises
+    ------
+    ValueError
+        One line: a record too short, or a figure the ``[imu]`` parser refuses.
+    """
+    ident = identify(imu, name=name, source=source, run=run)
+    ident.to_spec()  # a figure the parser refuses stops here, before anything is written
+    paths = write_identify_report(ident, out_dir)
+    spec = write_spec_toml(ident, Path(out_dir) / SPEC_FILE)
+    return summary(ident) + [f"wrote {spec}, {paths[0]}, {paths[1]}"]
