@@ -77,6 +77,14 @@ def _parser():
     a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
                    "(default: the method's own, shown by list)")
     a.add_argument("--json", action="store_true", help="print one JSON object")
+    i = sub.add_parser("identify", parents=[debug],
+                       help="the noise terms of a static recording from its Allan deviation, and an IMU spec .toml "
+                            "the other commands take (--imu)")
+    i.add_argument("imu_file")
+    i.add_argument("--format", help="the file's layout (as for align)")
+    i.add_argument("--name", help="the IMU's name in the spec (default: the file's name)")
+    i.add_argument("--out", default="identify", help="output folder for imu_spec.toml, identify.json and allan.png "
+                   "(default ./identify)")
     k = sub.add_parser("consistency", parents=[debug],
                        help="align consecutive windows of a recording without truth with each method and compare "
                             "them (self-consistency, and the methods' agreement)")
@@ -249,6 +257,16 @@ def _cmd_align(args):
         model = res.imu_model
         print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))
         print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
+    return 0
+
+
+def _cmd_identify(args):
+    from .identify import run_identify
+
+    imu, _ = _read_record(args)
+    name = args.name or Path(args.imu_file).stem
+    for line in run_identify(imu, Path(args.out), name=name, source=str(args.imu_file)):
+        print(line)
     return 0
 
 
@@ -489,8 +507,8 @@ def main(argv=None):
     # joblib's resource tracker (a child process) warns about the semaphores of workers stopped by a Ctrl-C
     # while it shuts down; that is joblib's housekeeping, not a message for the user
     os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker")
-    commands = {"list": _cmd_list, "align": _cmd_align, "consistency": _cmd_consistency, "run": _cmd_run,
-                "check": _cmd_check}
+    commands = {"list": _cmd_list, "align": _cmd_align, "identify": _cmd_identify, "consistency": _cmd_consistency,
+                "run": _cmd_run, "check": _cmd_check}
     try:
         # the workers leave a Ctrl-C to this process, which stops them: a worker interrupted inside a library's
         # clean-up would print its own traceback beside our one line

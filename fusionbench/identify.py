@@ -56,6 +56,8 @@ ADEV_UNITS = {"gyro": ("deg/h", units.DEG_PER_H), "accel": ("ug", units.UG)}
 #: SI unit of the Allan deviation.
 ADEV_SI = {"gyro": "rad/s", "accel": "m/s^2"}
 #: Relative deviation of the mean specific force from g beyond which the summary doubts the record is static.
+#: Below this chi-square probability a fit does not describe its axis's Allan curve (:meth:`Identification.poor_fits`).
+FIT_P_MIN = 1e-4
 STATIC_TOLERANCE = 0.02
 #: Quantum (increment per count) over the Allan quantisation coefficient Q: a rounding error uniform over one count
 #: has variance quantum^2 / 12, and white phase noise of variance Q^2 has Allan variance 3 Q^2 / tau^2.
@@ -186,6 +188,15 @@ class Identification:
         bound = np.array([f.curve.adev.min() / math.sqrt(allanfit.FLICKER) for f in fits])
         return np.where(measured, [f.value("B") for f in fits], bound), measured
 
+    def poor_fits(self):
+        """The axes the standard terms do not describe: ``[(sensor, axis, chi2, dof)]`` where the fit's chi-square
+        has a probability below :data:`FIT_P_MIN` (a vibration, a motion or a temperature run in the record, or a
+        sensor with other noise). Their terms, and the spec made of them, are not the sensor's noise."""
+        from scipy.stats import chi2 as chi2_dist
+
+        return [(s, AXES[j], f.chi2, f.dof) for s in SENSORS for j, f in enumerate(self.fits(s))
+                if f.dof > 0 and chi2_dist.sf(f.chi2, f.dof) < FIT_P_MIN]
+
     def static_note(self):
         """One line doubting that the record is static, or ""."""
         off = abs(self.mean_specific_force / units.G0 - 1.0)
@@ -251,6 +262,17 @@ def identify(imu: IMUData, *, name="identified", source="", run=0) -> Identifica
 
 def _fmt(v):
     return f"{v:.6g}"
+
+
+def poor_fit_note(ident: Identification):
+    """One line naming the axes whose Allan curve the standard terms do not describe, or ""."""
+    bad = ident.poor_fits()
+    if not bad:
+        return ""
+    axes = ", ".join(f"{s} {ax} (chi2 {c:.3g} on {d})" for s, ax, c, d in bad)
+    return (f"warning: the IEEE-952 terms do not describe {axes}: chi-square probability below {FIT_P_MIN:g}; a "
+            f"vibration, a motion or a temperature drift in the record? (see allan.png) Those terms, and the spec's, "
+            f"are not the sensor's noise")
 
 
 def _vec(values):
@@ -322,6 +344,9 @@ def write_spec_toml(ident: Identification, path):
     for key, value, comment in rows:
         text = json.dumps(value) if isinstance(value, str) else (_vec(value) if isinstance(value, list) else _fmt(value))
         lines.append(f"{key} = {text}" + (f"  # {comment}" if comment else ""))
+    for s, ax, c, d in ident.poor_fits():
+        lines.append(f"# WARNING: {s} {ax}: the IEEE-952 terms do not describe its Allan curve (chi2 {c:.3g} on {d} "
+                     f"degrees of freedom); its figures above are not the sensor's noise")
     for s in SENSORS:
         ramps = [ident.term(s, j, "R") for j in range(3)]
         if any(r.present for r in ramps):
@@ -347,7 +372,15 @@ def _axis_json(f: allanfit.AllanFit, sensor):
                     "datasheet_sigma": f.sigma(t) / factor if present else None, "datasheet_unit": ds}
     return {"tau_s": c.tau.tolist(), "adev": c.adev.tolist(), "adev_lo": c.lo.tolist(), "adev_hi": c.hi.tolist(),
             "edf": c.edf.tolist(), "noise_alpha": c.alpha.tolist(), "adev_unit": ADEV_SI[sensor],
-            "tau_floor_s": f.tau_floor, "chi2": f.chi2, "dof": f.dof, "terms": terms}
+            "tau_floor_s": f.tau_floor, "chi2": f.chi2, "dof": f.dof, "fit_p": _fit_p(f), "fit_adequate": _fit_p(f) >= FIT_P_MIN,
+            "terms": terms}
+
+
+def _fit_p(f):
+    """The probability of a chi-square at least the fit's on its degrees of freedom (1 with none left)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    return float(chi2_dist.sf(f.chi2, f.dof)) if f.dof > 0 else 1.0
 
 
 def report_dict(ident: Identification):
@@ -368,7 +401,8 @@ def report_dict(ident: Identification):
                                      "when above 1",
                       "significance_sigma": allanfit.SIGNIFICANCE,
                       "gauss_markov_peak": {"tau_over_T": x_peak, "adev_over_sigma": adev_peak}},
-           "turn_on_bias": "not observable in one static record: the spec's bias sigma is a placeholder (B)"}
+           "turn_on_bias": "not observable in one static record: the spec's bias sigma is a placeholder (B)",
+           "poor_fit_note": poor_fit_note(ident)}
     for s in SENSORS:
         sig, T, floor = ident.gauss_markov(s)
         out[s] = {"axes": {ax: _axis_json(f, s) for ax, f in zip(AXES, ident.fits(s))},
@@ -421,8 +455,8 @@ def summary(ident: Identification):
                  "the spec's bias sigmas are placeholders (B): replace them with the datasheet's bias repeatability")
     if any(ident.term(s, j, "R").present for s in SENSORS for j in range(3)):
         lines.append("rate ramp: the error model has none; reported, not in the spec")
-    note = ident.static_note()
-    return lines + ([note] if note else [])
+    notes = [ident.static_note(), poor_fit_note(ident)]
+    return lines + [n for n in notes if n]
 
 
 def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
