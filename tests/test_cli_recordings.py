@@ -11,6 +11,7 @@ from scipy.stats import chi2
 
 from fusionbench import attitude, trajectory as tj, units
 from fusionbench.imu import PRESETS, simulate
+from fusionbench.imudata import IMUData
 from fusionbench.imufiles import write_psins
 
 D = np.pi / 180
@@ -109,3 +110,12 @@ def test_consistency_on_a_moored_record_from_its_psins_file(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "window" in r.stderr
     r = cli("consistency", path, "--methods", "nosuch", "--out", tmp_path / "y")
     assert r.returncode == 2 and "nosuch" in r.stderr and not (tmp_path / "y").exists()
+
+
+def test_identify_refuses_a_record_too_short_with_one_line_and_writes_nothing(tmp_path, static):
+    _, imu = static
+    first5s = IMUData(imu.t[:500], imu.gyro[:, :500], imu.accel[:, :500], imu.kind)
+    short = write_psins(tmp_path / "short.imu", first5s, (0.0, 0.0, 0.0), lat=LAT)
+    r = cli("identify", short, "--out", tmp_path / "id")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "10 s" in r.stderr
+    assert not (tmp_path / "id").exists()

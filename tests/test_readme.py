@@ -8,7 +8,7 @@ import pytest
 
 
 def _run_block(marker=None):
-    """Execute the README's first Python block (or the first containing ``marker``); its namespace."""
+    """Execute the README's first Python block containing ``marker`` (or its first one); its namespace."""
     text = (Path(__file__).parents[1] / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     code = next(b for b in blocks if marker is None or marker in b)
@@ -18,7 +18,7 @@ def _run_block(marker=None):
 
 
 def test_readme_example_runs_and_levels_on_the_limit(capsys):
-    ns = _run_block()
+    ns = _run_block("CoarseAligner")
     mean = ns["phi"].mean(axis=0)
     # level: accelerometer bias / g, up to the white noise averaged over 20 runs x 300 s (~0.001 arcmin)
     assert mean[:2] == pytest.approx(ns["limit"][:2], abs=0.01)
@@ -39,3 +39,69 @@ def test_readme_platform_example_runs_and_meets_its_bound(capsys):
     sig = model.to_customary(ns["res"].sigma[-1, :42])[model.KT]
     bound = model.to_customary(ns["bound"][:42])[model.KT]
     assert np.all(np.abs(ns["err"][model.KT]) < 3 * sig) and np.all(sig < 2 * bound)
+
+
+def _shown(title):
+    """The output the README prints under its ``$ fusionbench <title> ...`` line: (command, lines)."""
+    text = (Path(__file__).parents[1] / "README.md").read_text()
+    block = next(b for b in re.findall(r"```\n(\$ fusionbench .*?)```", text, re.S) if b.startswith(f"$ fusionbench {title}"))
+    first, *rest = block.strip("\n").split("\n")
+    return first[2:].split(), rest
+
+
+_NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+
+
+def _same_numbers(shown, printed, rel=0.02):
+    """The README's lines and the printed ones say the same words and, within ``rel``, the same numbers."""
+    assert len(shown) == len(printed)
+    for a, b in zip(shown, printed):
+        assert _NUMBER.sub("#", a) == _NUMBER.sub("#", b), (a, b)
+        for x, y in zip(_NUMBER.findall(a), _NUMBER.findall(b)):
+            assert float(x) == pytest.approx(float(y), rel=rel, abs=1e-12), (a, b)
+
+
+def test_readme_recording_identify_consistency_twin(tmp_path, monkeypatch):
+    """The README's walk-through on the file it makes: the printed outputs are what the commands print, the
+    identified noise is the simulator's truth, and the twin runs on the identified spec."""
+    import subprocess
+    import sys
+
+    from scipy.stats import chi2
+
+    monkeypatch.chdir(tmp_path)
+    _run_block('write_psins("bench.imu"')
+
+    def run(args):
+        r = subprocess.run([sys.executable, "-m", "fusionbench", *args[1:]], capture_output=True, text=True,
+                           timeout=600)
+        assert r.returncode == 0, r.stderr
+        return r.stdout.strip("\n").split("\n")
+
+    cmd, shown = _shown("identify")
+    printed = run(cmd)
+    _same_numbers(shown, printed)
+    from fusionbench.imu import load_spec
+    from fusionbench.units import DEG_PER_SQRT_H, UG_PER_SQRT_HZ
+
+    spec = load_spec("identified/imu_spec.toml")
+    # the truth: 0.05 deg/sqrt(h) and 30 ug/sqrt(Hz) (an hour of 100 Hz pins N to about 0.2 %)
+    assert np.array(spec.gyro.white) / DEG_PER_SQRT_H == pytest.approx([0.05] * 3, rel=0.01)
+    assert np.array(spec.accel.white) / UG_PER_SQRT_HZ == pytest.approx([30.0] * 3, rel=0.01)
+
+    cmd, shown = _shown("consistency")
+    printed = run(cmd)
+    _same_numbers(shown, printed)
+    import json
+
+    res = json.loads((tmp_path / "consistency" / "consistency.json").read_text())
+    pairs = res["windows"] - 1
+    lo, hi = (np.sqrt(chi2.ppf(q, pairs) / pairs) for q in (0.001, 0.999))
+    assert lo < res["methods"]["kf"]["summary"]["rms_over_expected"]["U"] < hi
+
+    cmd, shown = _shown("run twin")
+    assert cmd[:3] == ["fusionbench", "run", "twin"] and "--imu" in cmd and "--site" in cmd
+    small = cmd[1:] + ["--methods", "coarse-i0", "--runs", "1"]  # the same command, one method, one run
+    run(["fusionbench", *small[:small.index("--out") + 1], "twin-small", *small[small.index("--out") + 2:]])
+    m = json.loads((tmp_path / "twin-small" / "metrics.json").read_text())
+    assert {c["lat_deg"] for c in m["conditions"].values()} == {34.2} and m["conditions"]["static-h0"]["imu"] == "bench"
