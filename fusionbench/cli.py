@@ -9,6 +9,7 @@ stops reading (``fusionbench list | head -1``) ends it quietly with exit status 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import inspect
 import json
 import os
@@ -114,6 +115,12 @@ def _parser():
                    "it); replaces the scenario's [imu] (a conformance matrix's imu); required by a template (twin)")
     r.add_argument("--site", type=_site_text, help="your site for one scenario: LAT[,LON[,H]] in deg, deg, m; "
                    "replaces the scenario's [site]; required by a template (twin)")
+    where = r.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run the Monte Carlo on a Dask cluster: the address of "
+                       "its scheduler (tcp://host:8786); needs pip install 'fusionbench[cluster]'; the numbers are "
+                       "those of --jobs 1")
+    where.add_argument("--cluster", metavar="local[:N]", help="run the Monte Carlo on a Dask LocalCluster of N worker "
+                       "processes on this machine (default one per core)")
     r.add_argument("--jobs", type=_integer("a non-zero worker count (-1: all cores)", lambda v: v != 0), default=-1,
                    help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
                         "process; the numbers do not depend on it")
@@ -339,10 +346,6 @@ def _check_methods(scns, methods):
 
 
 def _cmd_run(args):
-    from .overview import write_overview
-    from .experiment import write_scenario_report
-    from .experiment import run_scenario
-
     overrides = _overrides(args)
     if args.scenario == "all":
         if overrides:
@@ -364,10 +367,32 @@ def _cmd_run(args):
     if args.scenario == "all" and reportdir.is_report(out_dir):
         raise ValueError(f"{out_dir}: expected a folder for the reports of 'all', found one scenario's report: give "
                          f"--out another folder")
-    outs = []
     # one bar for the whole command (scenarios x runs, elapsed and left) on a terminal; else a line per scenario
     total = sum(progress.expected_runs(scn, args.runs, args.quick) for scn in scns)
-    pbar = None
+    with _workers(args) as n_jobs:
+        return _run_all(args, scns, methods, out_dir, total, n_jobs)
+
+
+@contextlib.contextmanager
+def _workers(args):
+    """The ``n_jobs`` of the runners: ``--jobs`` on this machine, or a Dask cluster's (``--scheduler``,
+    ``--cluster``) while the block runs."""
+    if args.scheduler is None and args.cluster is None:
+        yield args.jobs
+        return
+    from .cluster import connect, parse_cluster
+
+    size = None if args.cluster is None else parse_cluster(args.cluster)
+    with connect(args.scheduler, size) as n_jobs:
+        yield n_jobs
+
+
+def _run_all(args, scns, methods, out_dir, total, n_jobs):
+    """Run ``scns`` with ``n_jobs`` workers and write their reports (and the overview of 'all')."""
+    from .experiment import run_scenario, write_scenario_report
+    from .overview import write_overview
+
+    outs, pbar = [], None
     # before any Monte Carlo: every report folder replaceable, its parent writable (created)
     created = reportdir.prepare([out_dir / scn.name for scn in scns] if args.scenario == "all" else [out_dir])
     try:
@@ -379,12 +404,13 @@ def _cmd_run(args):
             t0 = time.perf_counter()
             pbar.set_postfix_str(scn.name)
             res = run_scenario(scn, methods=methods, runs=args.runs, seed=args.seed, quick=args.quick,
-                               n_jobs=args.jobs, progress=pbar)
+                               n_jobs=n_jobs, progress=pbar)
             wall = time.perf_counter() - t0
             m = res.metrics
             m["provenance"] = provenance.collect(seed=args.seed, runs=m.get("runs", args.runs or 0),
                                                  duration_s=m.get("duration_s", scn.sized(args.quick)[0]),
                                                  quick=args.quick, wall_s=wall)
+            overrides = _overrides(args)
             if overrides:  # the sensor and site this run was given instead of the scenario's own
                 m["provenance"]["overrides"] = overrides
             folder = out_dir / scn.name if args.scenario == "all" else out_dir
