@@ -1,4 +1,5 @@
-"""Command line: ``fusionbench list / run / align / check`` (the contract: docs/contract.md).
+"""Command line: ``fusionbench list / run / check`` here, ``align / identify / consistency`` in
+:mod:`fusionbench.cli_record` (the contract: docs/contract.md).
 
 Bad input ends with one line ``fusionbench: error: ...`` naming the file or field, exit status 2; so does an
 error inside a method (naming it). Ctrl-C ends with ``fusionbench: interrupted``, exit status 130; a reader that
@@ -11,7 +12,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import inspect
-import json
 import os
 import re
 import signal
@@ -23,10 +23,9 @@ from pathlib import Path
 import numpy as np
 from joblib import parallel_config
 
-from . import __version__, attitude, progress, provenance, reportdir, scenarios
-from .aligner import (GROUP, MAX_BIAS_TO_EARTH_RATE, AlignmentResult, Site, available_methods, check_time_rule,
-                      entry_class, load_method, supports, uses_noise_model)
-from .imu import load_spec
+from . import __version__, cli_record, progress, provenance, reportdir, scenarios
+from .aligner import (GROUP, MAX_BIAS_TO_EARTH_RATE, available_methods, supports, uses_noise_model)
+from .cli_common import exception_text, integer, named
 
 #: Exit statuses: a check found a regression; bad input or a failed method; interrupted (128 + SIGINT); the
 #: reader of standard output went away (128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended).
@@ -41,23 +40,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_ERROR, f"fusionbench: error: {message} (see {self.prog} --help)\n")
 
 
-#: How far the mean specific force of a record given to ``align`` may be from the site's gravity (relative): a
-#: moored ship's sway changes it by far less, a unit error (g for m/s^2) or an accelerating vehicle by far more.
-GRAVITY_TOLERANCE = 0.05
-
-def _integer(expected, ok):
-    """An argparse type: an integer for which ``ok`` holds, else one line saying what was ``expected``."""
-    def parse(text):
-        try:
-            value = int(text)
-        except ValueError:
-            value = None
-        if value is None or not ok(value):
-            raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}")
-        return value
-    return parse
-
-
 def _parser():
     debug = _Parser(add_help=False)  # --traceback also after the command, without overriding one before it
     debug.add_argument("--traceback", action="store_true", default=argparse.SUPPRESS,
@@ -69,42 +51,14 @@ def _parser():
                    help=f"on an error show the full trace, not one line (or set {TRACEBACK_ENV}=1)")
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("list", parents=[debug], help="built-in scenarios and alignment methods, one per line")
-    a = sub.add_parser("align", parents=[debug],
-                       help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
-    a.add_argument("imu_file")
-    _record_arguments(a)
-    a.add_argument("--method", default="coarse", help="method name (see list; named variants included) or "
-                   "module:Class (default coarse)")
-    a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
-                   "(default: the method's own, shown by list)")
-    a.add_argument("--json", action="store_true", help="print one JSON object")
-    i = sub.add_parser("identify", parents=[debug],
-                       help="the noise terms of a static recording from its Allan deviation, and an IMU spec .toml "
-                            "the other commands take (--imu)")
-    i.add_argument("imu_file")
-    i.add_argument("--format", help="the file's layout (as for align)")
-    i.add_argument("--name", help="the IMU's name in the spec (default: the file's name)")
-    i.add_argument("--out", default="identify", help="output folder for imu_spec.toml, identify.json and allan.png "
-                   "(default ./identify)")
-    k = sub.add_parser("consistency", parents=[debug],
-                       help="align consecutive windows of a recording without truth with each method and compare "
-                            "them (self-consistency, and the methods' agreement)")
-    k.add_argument("imu_file")
-    _record_arguments(k)
-    k.add_argument("--methods", default="coarse,coarse-i0,pid,adrc,kf",
-                   help="comma-separated method names (default coarse,coarse-i0,pid,adrc,kf)")
-    k.add_argument("--window", type=float, default=300.0, help="window length, s (default 300)")
-    k.add_argument("--imu", help="IMU noise model (a preset or an IMU spec .toml, as `identify` writes it): given to "
-                   "the methods that use one, and with it the report shows what the data allow (the attainable bound)")
-    k.add_argument("--out", default="consistency", help="output folder for consistency.json and consistency.png "
-                   "(default ./consistency)")
+    cli_record.add_parsers(sub, debug)
     r = sub.add_parser("run", parents=[debug],
                        help="Monte Carlo run of a scenario (a built-in name, 'all', or a .toml file)")
     r.add_argument("scenario")
     r.add_argument("--methods", help="comma-separated method names (default: the scenario's)")
-    r.add_argument("--runs", type=_integer("a positive number of Monte Carlo runs", lambda v: v >= 1),
+    r.add_argument("--runs", type=integer("a positive number of Monte Carlo runs", lambda v: v >= 1),
                    help="Monte Carlo runs (default: the scenario's)")
-    r.add_argument("--seed", type=_integer("a non-negative integer", lambda v: v >= 0), default=0)
+    r.add_argument("--seed", type=integer("a non-negative integer", lambda v: v >= 0), default=0)
     r.add_argument("--quick", action="store_true", help="reduced size for CI")
     r.add_argument("--out", default="report",
                    help="output folder (default ./report): one scenario's report goes into it, 'all' puts one "
@@ -121,7 +75,7 @@ def _parser():
                        "those of --jobs 1")
     where.add_argument("--cluster", metavar="local[:N]", help="run the Monte Carlo on a Dask LocalCluster of N worker "
                        "processes on this machine (default one per core)")
-    r.add_argument("--jobs", type=_integer("a non-zero worker count (-1: all cores)", lambda v: v != 0), default=-1,
+    r.add_argument("--jobs", type=integer("a non-zero worker count (-1: all cores)", lambda v: v != 0), default=-1,
                    help="parallel workers over batches of runs (joblib); default -1, all cores; 1 runs in this "
                         "process; the numbers do not depend on it")
     c = sub.add_parser("check", parents=[debug],
@@ -154,44 +108,6 @@ def _overrides(args):
     if args.site is not None:
         out["site"] = args.site
     return out
-
-
-def _record_arguments(p):
-    """The options of a command that reads a user's recording: its format and its site."""
-    p.add_argument("--format", help="the file's layout: a built-in (pyins, pyins-increment, kf-gins, fusionbench-csv) "
-                   "or a layout .toml (docs/layouts.md); default: by extension (.csv, .npz, .imu)")
-    p.add_argument("--lat", type=float, help="latitude, deg (default: the file's header, for .imu; required for "
-                   "other files)")
-    p.add_argument("--lon", type=float, help="longitude, deg (default: the file's header, else 0)")
-    p.add_argument("--height", type=float, help="height, m (default: the file's header, else 0)")
-
-
-def _read_record(args, min_samples=2):
-    """The recording ``args.imu_file`` (one run, SI, body RFU) and its meta, read by ``--format`` or by extension."""
-    if args.format is None:
-        from .imufiles import read_imu
-
-        return read_imu(args.imu_file, min_samples=min_samples)
-    from .layouts import layout_from_name_or_file, read_layout
-
-    return read_layout(args.imu_file, layout_from_name_or_file(args.format), min_samples=min_samples)
-
-
-def _site(args, meta):
-    """The site of a recording: each of --lat, --lon, --height given on the command line wins over the file's
-    header (a PSINS .imu holds all three); a file without a header needs --lat (longitude and height default
-    to 0)."""
-    if not meta:  # the command line's own values alone
-        return Site.from_degrees(args.lat, args.lon or 0.0, args.height or 0.0) if args.lat is not None else None
-    if args.lat is None and "lat" not in meta:
-        from .imufiles import IMUFileError
-
-        raise IMUFileError(meta["path"], f"a {meta['format']} file holds no site: give --lat DEG (and --lon DEG, "
-                                         f"--height M; they default to 0)")
-    lat = args.lat if args.lat is not None else np.degrees(meta["lat"])
-    lon = args.lon if args.lon is not None else np.degrees(meta.get("lon", 0.0))
-    h = args.height if args.height is not None else meta.get("h", 0.0)
-    return Site.from_degrees(lat, lon, h)
 
 
 def _cmd_list(args):
@@ -233,106 +149,6 @@ def _method_notes(cls):
     return "".join(f" [{n}]" for n in notes)
 
 
-def _cmd_align(args):
-    from .imufiles import IMUFileError
-
-    noise = None if args.imu is None else load_spec(args.imu)
-    method = _named(args.method, lambda: load_method(args.method, imu=noise), group=GROUP)
-    _site(args, {})  # what the command line gives is checked before the file is read
-    imu, meta = _read_record(args)
-    site = _site(args, meta)
-    if imu.duration < method.min_duration_s:
-        raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
-                           f"it needs at least {method.min_duration_s:g} s")
-    f_mean = float(np.linalg.norm(imu.mean_rates()[1][0]))
-    if abs(f_mean - site.g) > GRAVITY_TOLERANCE * site.g:  # align takes a stationary or swaying record
-        raise IMUFileError(f"{args.imu_file}: expected a stationary or swaying record, whose mean specific force is "
-                           f"gravity ({site.g:.4f} m/s^2 at the site, within {100 * GRAVITY_TOLERANCE:g} %), found "
-                           f"{f_mean:.4g} m/s^2 (accelerometers in other units, or a moving base?)")
-    res = _named(args.method, lambda: method.align(imu, site), "align() ",
-                 also=(getattr(method, "name", ""),))
-    if not isinstance(res, AlignmentResult):
-        raise ValueError(f"method {args.method!r}: align() returned {_kind(res)}, expected an AlignmentResult")
-    check_time_rule(res, imu, args.method)
-    C = res.C_bn_final[0]
-    pitch, roll, yaw = np.degrees(attitude.dcm_to_euler(C))
-    out = {"method": method.name, "t_end": res.t_end, "C_bn": C.tolist(), "pitch_deg": float(pitch),
-           "roll_deg": float(roll), "yaw_deg": float(yaw), "heading_deg": float(np.degrees(attitude.heading(np.radians(yaw))))}
-    if args.json:
-        print(json.dumps(out, allow_nan=False))
-    else:
-        model = res.imu_model
-        print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))
-        print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
-    return 0
-
-
-def _cmd_identify(args):
-    from .identify import run_identify
-
-    imu, _ = _read_record(args)
-    name = args.name or Path(args.imu_file).stem
-    for line in run_identify(imu, Path(args.out), name=name, source=str(args.imu_file)):
-        print(line)
-    return 0
-
-
-def _cmd_consistency(args):
-    from .consistency import consistency
-    from .consistency_report import summary_lines, write_consistency_report
-
-    methods = [m for m in args.methods.split(",") if m]
-    if not methods:
-        raise ValueError(f"--methods: expected comma-separated method names, found {args.methods!r}")
-    for spec in methods:  # each one builds, or one line names it, before the record is read
-        _named(spec, lambda: load_method(spec, imu=None if args.imu is None else load_spec(args.imu)), group=GROUP)
-    _site(args, {})
-    imu, meta = _read_record(args)
-    site = _site(args, meta)
-    res = consistency(imu, site, methods, window_s=args.window, imu_model=args.imu)  # a bar on a terminal
-    paths = write_consistency_report(res, Path(args.out))
-    print(f"{args.imu_file}: {imu.duration:.0f} s at {1 / imu.dt:g} Hz, site {np.degrees(site.lat):.4f} deg latitude")
-    for line in summary_lines(res):
-        print(line)
-    print(f"written: {', '.join(map(str, paths))}")
-    return 0
-
-
-def _named(spec, call, what="", also=(), group=None):
-    """``call()``, an error in it turned into one ValueError naming method ``spec`` and the exception (``what``:
-    the call, for the message); a ValueError that names ``spec`` or one of ``also`` (the method's own name: a
-    method refusing the data says who refuses) is left as it is. With ``group`` (its entry-point group) a
-    ``module:Class`` spec must name something callable."""
-    module, colon, cls = spec.partition(":")
-    if colon and not (module and cls):
-        raise ValueError(f"method {spec!r}: expected a registered name or module:Class, found {spec!r}")
-    try:
-        if colon and group:  # a module:Class path: something to instantiate
-            obj = entry_class(group, spec, "method")
-            if not callable(obj):
-                raise ValueError(f"method {spec!r}: expected a class, found {_kind(obj)}")
-        return call()
-    except ValueError as exc:
-        if any(name and name in str(exc) for name in (spec, *also)):
-            raise
-        raise ValueError(f"method {spec!r}: {_exception_text(exc)}") from exc
-    except Exception as exc:  # a user's module:Class raising, not a class, not importable (SyntaxError)
-        raise ValueError(f"method {spec!r}: {what}raised {_exception_text(exc)}") from exc
-
-
-def _kind(value):
-    name = type(value).__name__
-    return "None" if value is None else f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
-
-
-def _exception_text(exc):
-    """``Type: first line of the message`` (the message alone for a ValueError or an OSError)."""
-    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-    if isinstance(exc, (ValueError, OSError)) and msg:
-        return msg
-    return f"{type(exc).__name__}: {msg}" if msg else type(exc).__name__
-
-
 def _check_methods(scns, methods):
     """Load each ``module:Class`` method named on the command line for every scenario before any work, so that
     one that cannot be imported or built is one line naming it (the registered ones are the package's)."""
@@ -342,7 +158,7 @@ def _check_methods(scns, methods):
         loader, group = getattr(scn, "method", None), load_experiment(scn.experiment).method_group
         for spec in methods:
             if loader and ":" in spec and spec not in getattr(scn, "variants", {}):
-                _named(spec, lambda: loader(spec), group=group)
+                named(spec, lambda: loader(spec), group=group)
 
 
 def _cmd_run(args):
@@ -484,7 +300,7 @@ def _culprit(exc, specs):
 def _error_line(exc, args):
     """The one line of an error: its message, naming the method it came from when that was a user's
     ``module:Class``; an unexpected exception also gives its type and where to find more."""
-    text = _exception_text(exc)
+    text = exception_text(exc)
     who = _culprit(exc, [*(getattr(args, "methods", None) or "").split(","), getattr(args, "method", "")])
     if who and repr(who) not in text:
         return f"method {who!r}: {text}"
@@ -533,8 +349,8 @@ def main(argv=None):
     # joblib's resource tracker (a child process) warns about the semaphores of workers stopped by a Ctrl-C
     # while it shuts down; that is joblib's housekeeping, not a message for the user
     os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker")
-    commands = {"list": _cmd_list, "align": _cmd_align, "identify": _cmd_identify, "consistency": _cmd_consistency,
-                "run": _cmd_run, "check": _cmd_check}
+    commands = {"list": _cmd_list, "align": cli_record.cmd_align, "identify": cli_record.cmd_identify,
+                "consistency": cli_record.cmd_consistency, "run": _cmd_run, "check": _cmd_check}
     try:
         # the workers leave a Ctrl-C to this process, which stops them: a worker interrupted inside a library's
         # clean-up would print its own traceback beside our one line
