@@ -2,8 +2,8 @@
 
 Run from the repository root::
 
-    python benchmarks/perf_methods.py           # full: 20 runs x 600 s at 100 Hz (about 10 min on 2 cores)
-    python benchmarks/perf_methods.py --quick   # 5 runs x 120 s
+    python benchmarks/perf_methods.py           # full: 20 runs x 600 s at 100 Hz (7.5 min on 2 idle cores)
+    python benchmarks/perf_methods.py --quick   # 5 runs x 120 s (about 30 s)
 
 Workload: seed 000's Table-1 sway at 34 N (pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz about a -30 deg yaw, as
 ``perf_kalman.py``), navigation-grade IMU (preset ``navigation``), 100 Hz, ``simulate(..., seed=0)``. A method
