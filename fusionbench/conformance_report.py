@@ -53,10 +53,10 @@ def scoreboard_figure(m, path):
     ax.set_xticks(range(len(methods)), methods, rotation=45, ha="right", fontsize=8)
     ax.set_yticks(range(len(conds)), conds, fontsize=8)
     ax.set_xlabel("method", fontsize=9)
-    ax.set_ylabel("condition (base, latitude, heading, IMU grade)", fontsize=9)
+    ax.set_ylabel("condition", fontsize=9)
     cb = fig.colorbar(im, ax=ax, fraction=0.08, pad=0.03, aspect=30)
     cb.set_ticks([0.1, 0.3, 1.0, 3.0, 10.0], labels=["0.1", "0.3", "1", "3", "10"])
-    cb.set_label("efficiency / the method's threshold (1: the pass line; dimensionless)", fontsize=8)
+    cb.set_label("efficiency / threshold (1: pass line)", fontsize=8)
     sb = m["scoreboard"]
     fg.finish(fig, f"{m['scenario']}: azimuth efficiency, {m['runs']} runs per cell; {sb['passed']} of "
               f"{sb['total']} cells pass", ["Efficiency: RMS over runs of (final azimuth error - limit) over the "
