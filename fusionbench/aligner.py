@@ -149,12 +149,14 @@ def check_time_rule(res: AlignmentResult, imu: IMUData, name: str | None = None)
     """Raise ValueError (one line naming the method) unless ``res`` keeps the time rule on ``imu``.
 
     Checked: one attitude per recording, finite rotation matrices, strictly increasing times inside the
-    data's span, and the last time at the last sample (to a millionth of a sample interval).
+    data's span, and the last time at the last sample (to a millionth of a sample interval). ``imu`` is an
+    :class:`~fusionbench.imudata.IMUData` or any record with its ``runs``, ``dt``, ``t0`` and ``t_last`` (s), such
+    as the runner's stream of a long record (:class:`fusionbench.streaming.SimulatedStream`).
     """
     if not isinstance(res, AlignmentResult):
         raise ValueError(f"method {name!r}: align() returned {type(res).__name__}, expected an AlignmentResult")
     who = f"method {name or res.method!r}"
-    t_last = float(imu.increments()[0][-1])
+    t_last = imu.t_last
     if res.C_bn.shape[0] != imu.runs:
         raise ValueError(f"{who}: expected an attitude history per recording ({imu.runs}), found {res.C_bn.shape[0]}")
     if res.t.size == 0 or not np.all(np.isfinite(res.t)) or np.any(np.diff(res.t) <= 0):

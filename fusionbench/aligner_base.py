@@ -42,7 +42,7 @@ import numpy as np
 from . import earth
 from .aligner import AlignmentResult, Site, check_azimuth_observable, supports
 from .imudata import IMUData
-from .inputs import check_inputs
+from .inputs import check_init, check_inputs
 
 
 class AlignerBase:
@@ -108,6 +108,33 @@ class AlignerBase:
             raise ValueError(f"{self.name}: duration: expected at least {self.min_duration_s:g} s of data, found "
                              f"{imu.duration:g} s")
         return vref, init
+
+    def align_chunks(self, chunks, site: Site, record, init=None) -> AlignmentResult:
+        """Align R recordings given as consecutive chunks, for a method that defines ``_align_chunks`` (a long
+        record streamed: :mod:`fusionbench.streaming`).
+
+        Parameters
+        ----------
+        chunks : iterable of (IMUData, ndarray or None)
+            Consecutive chunks: increments (kind ``"increment"``, body RFU) and the reference velocity (R, n, 3),
+            ENU, m/s, at their samples, or None. The samples are not checked (a stream is not held).
+        site : Site
+        record : object
+            The whole record's ``runs``, ``dt`` (s), ``t0`` and ``duration`` (s), e.g.
+            :class:`fusionbench.streaming.SimulatedStream`.
+        init : ndarray, shape (3, 3) or (R, 3, 3), optional
+            Initial attitude C_bn; checked and broadcast as by :meth:`align`.
+
+        The policy of :meth:`align` but for the samples themselves, then ``_align_chunks(chunks, site, init, dt,
+        t0, runs)``.
+        """
+        init = check_init(init, record.runs, self.name, required=supports(self).needs_init)
+        earth.check_latitude(site.lat, f"{self.name}: site latitude", self.max_latitude_deg)
+        check_azimuth_observable(self.spec, site, self.name)
+        if record.duration < self.min_duration_s:
+            raise ValueError(f"{self.name}: duration: expected at least {self.min_duration_s:g} s of data, found "
+                             f"{record.duration:g} s")
+        return self._align_chunks(chunks, site, init, record.dt, record.t0, record.runs)
 
     def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
         """The method itself, on arguments the policy has checked.

@@ -33,7 +33,7 @@ from .imudata import IMUData
 
 __all__ = ["SensorErrors", "IMUSpec", "NoiseSchedule", "VelocityReferenceSpec",
            "PRESETS", "SPEC_OVERRIDES", "SPEC_SCALARS", "simulate", "simulate_chunks", "simulate_vref",
-           "run_seed_sequence", "spec_from_table", "schedules_from_list", "load_spec", "spec_field", "near"]
+           "vref_stream", "chunk_grid", "run_seed_sequence", "spec_from_table", "schedules_from_list", "load_spec", "spec_field", "near"]
 
 # stream indices inside a run's SeedSequence
 _CONST, _G_WHITE, _A_WHITE, _G_GM, _A_GM, _G_RW, _A_RW, _VREF = range(8)
@@ -425,6 +425,13 @@ def _sensor_chunk(e: SensorErrors, st, u, t, dt, schedules, sensor, rng_white, r
     return y
 
 
+def chunk_grid(n_total, dt, chunk_s=600.0):
+    """The chunks of :func:`simulate_chunks`: ``[(first sample k0, samples n), ...]`` for ``n_total`` samples of
+    ``dt`` s in chunks of ``chunk_s`` s; chunk k0 ends its samples at ``k0 dt + (1 .. n) dt`` (s)."""
+    per_chunk = max(1, int(round(chunk_s / dt)))
+    return [(k0, min(per_chunk, n_total - k0)) for k0 in range(0, n_total, per_chunk)]
+
+
 def simulate_chunks(trajectory, spec: IMUSpec, dt, runs=1, seed=0, first_run=0, chunk_s=600.0, duration=None):
     """Yield IMUData chunks (kind ``"increment"``) of the trajectory seen through the IMU ``spec``.
 
@@ -461,9 +468,7 @@ def simulate_chunks(trajectory, spec: IMUSpec, dt, runs=1, seed=0, first_run=0, 
     if n_total < 1:
         raise ValueError(f"simulate duration: expected at least one sample of {dt} s, found {duration} s")
     states = [_RunState(spec, seed, first_run + r) for r in range(runs)]
-    per_chunk = max(1, int(round(chunk_s / dt)))
-    for k0 in range(0, n_total, per_chunk):
-        n = min(per_chunk, n_total - k0)
+    for k0, n in chunk_grid(n_total, dt, chunk_s):
         t, dth, dv = trajectory.increments(k0 * dt, dt, n)
         g = np.empty((runs, n, 3))
         a = np.empty((runs, n, 3))
@@ -491,10 +496,15 @@ def simulate(trajectory, spec: IMUSpec, dt, runs=1, seed=0, first_run=0, duratio
     """
     if output not in ("increment", "rate"):
         raise ValueError(f"output: expected 'increment' or 'rate', found {output!r}")
-    chunks = list(simulate_chunks(trajectory, spec, dt, runs, seed, first_run, duration=duration))
-    t = np.concatenate([c.t for c in chunks])
-    g = np.concatenate([c.gyro for c in chunks], axis=1)
-    a = np.concatenate([c.accel for c in chunks], axis=1)
+    t, g, a, k0 = [], None, None, 0
+    for c in simulate_chunks(trajectory, spec, dt, runs, seed, first_run, duration=duration):
+        if g is None:  # the whole batch allocated once and filled chunk by chunk: one copy of the samples
+            n_total = int(round((trajectory.duration if duration is None else duration) / dt))
+            g, a = np.empty((runs, n_total, 3)), np.empty((runs, n_total, 3))
+        g[:, k0:k0 + c.t.size], a[:, k0:k0 + c.t.size] = c.gyro, c.accel
+        t.append(c.t)
+        k0 += c.t.size
+    t = np.concatenate(t)
     if output == "rate":
         return IMUData(t, g / dt, a / dt, "rate")
     return IMUData(t, g, a, "increment")
@@ -511,15 +521,29 @@ def simulate_vref(trajectory, vspec: VelocityReferenceSpec, t, runs=1, seed=0, f
     ndarray, shape (runs, N, 3)
         Reference velocity, ENU, m/s.
     """
-    t = np.asarray(t, dtype=float)
-    v_nom, _ = trajectory.translation.mean_velocity(t)
-    out = np.broadcast_to(v_nom, (runs,) + v_nom.shape).copy()
+    return vref_stream(trajectory, vspec, runs, seed, first_run)(t)
+
+
+def vref_stream(trajectory, vspec: VelocityReferenceSpec, runs=1, seed=0, first_run=0):
+    """The velocity reference of :func:`simulate_vref` drawn chunk by chunk.
+
+    Returns a function of the times ``t`` (n,) s of consecutive chunks that gives their samples (runs, n, 3), ENU,
+    m/s; each run's noise continues from the previous call, so the chunks joined equal :func:`simulate_vref` on
+    all their times, bit for bit."""
     sigma = np.array(vspec.sigma)
-    if np.any(sigma > 0):
-        q = np.ones_like(t)
-        for s in vspec.schedules:
-            q = np.where((t >= s.start) & (t < s.end), q * s.factor, q)
-        for r in range(runs):
-            rng = np.random.default_rng(run_seed_sequence(seed, first_run + r).spawn(8)[_VREF])
-            out[r] += rng.standard_normal((t.size, 3)) * sigma * np.sqrt(q)[:, None]
-    return out
+    rngs = [np.random.default_rng(run_seed_sequence(seed, first_run + r).spawn(8)[_VREF]) for r in range(runs)] \
+        if np.any(sigma > 0) else []
+
+    def samples(t):
+        t = np.asarray(t, dtype=float)
+        v_nom, _ = trajectory.translation.mean_velocity(t)
+        out = np.broadcast_to(v_nom, (runs,) + v_nom.shape).copy()
+        if rngs:
+            q = np.ones_like(t)
+            for s in vspec.schedules:
+                q = np.where((t >= s.start) & (t < s.end), q * s.factor, q)
+            for r, rng in enumerate(rngs):
+                out[r] += rng.standard_normal((t.size, 3)) * sigma * np.sqrt(q)[:, None]
+        return out
+
+    return samples

@@ -137,6 +137,11 @@ class IMUData:
         return float(self.t[0] - self.dt) if self.kind == "increment" else float(self.t[0])
 
     @property
+    def t_last(self) -> float:
+        """Time of the last sample (the end of the last increment), s: where a result's history ends."""
+        return float(self.t[-1])
+
+    @property
     def duration(self) -> float:
         """Time from the initial state to the last sample, s."""
         return float(self.t[-1] - self.t0)

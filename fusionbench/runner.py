@@ -17,7 +17,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from . import imu as imu_mod
-from . import earth, metrics, units
+from . import earth, metrics, streaming, units
 from .aligner import check_time_rule
 from .imudata import IMUData
 from .imufiles import atomic_open
@@ -105,17 +105,32 @@ def _simulate_batch(scn, first_run, runs, seed, duration):
     data = imu_mod.simulate(traj, scn.imu_spec, scn.dt, runs=runs, seed=seed, first_run=first_run)
     t_inc, _, _ = data.increments()
     vref = None  # a fixed base without a reference's noise: the zero-velocity assumption, as a user's align makes it
-    if not traj.translation.is_static() or any(scn.vref_spec.sigma):
+    if streaming.needs_vref(scn, traj):
         vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
     return traj, data, vref, scn.initial_guess(traj.truth([data.t0]).C_bn[0])
+
+
+def _stream_batch(scn, first_run, runs, seed, duration):
+    """Runs first_run..first_run+runs-1 as a stream of chunks (:mod:`fusionbench.streaming`): (trajectory, stream,
+    None, initial guess or None), the stream in place of the data and its reference."""
+    traj = scn.trajectory(duration)
+    stream = streaming.SimulatedStream(scn, traj, first_run, runs, seed, duration)
+    return traj, stream, None, scn.initial_guess(traj.truth([stream.t0]).C_bn[0])
 
 
 def _run_units(scn, method_names, first_run, runs, seed, duration, refusals=False):
     """Simulate runs first_run..first_run+runs-1 once and yield ``(name, outcome)`` as each method finishes.
 
-    With ``refusals`` a method that refuses the data (ValueError) gets its message instead of an outcome."""
-    sim = _simulate_batch(scn, first_run, runs, seed, duration)
+    A record of at least :data:`fusionbench.streaming.STREAM_MIN_S` goes as a stream of chunks to the methods that
+    take one; the others share one simulation of the whole batch. With ``refusals`` a method that refuses the data
+    (ValueError) gets its message instead of an outcome."""
+    whole = None
     for name in method_names:
+        if duration >= streaming.STREAM_MIN_S and streaming.takes_chunks(scn.method(name)):
+            sim = _stream_batch(scn, first_run, runs, seed, duration)
+        else:
+            whole = whole or _simulate_batch(scn, first_run, runs, seed, duration)
+            sim = whole
         yield name, _align_batch(scn, name, sim, first_run, refusals)
 
 
@@ -132,9 +147,11 @@ def _align_batch(scn, name, sim, first_run, refusals):
     if name in scn.variants:
         opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
         desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
+    stream = isinstance(data, streaming.SimulatedStream)
     t0 = time.perf_counter()
     try:
-        res = method.align(data, scn.site, vref=vref, init=init)
+        res = method.align_chunks(data, scn.site, data, init=init) if stream else \
+            method.align(data, scn.site, vref=vref, init=init)
     except ValueError as exc:
         if not refusals:
             raise
@@ -151,6 +168,8 @@ def _align_batch(scn, name, sim, first_run, refusals):
     if res.causal:
         settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
         done = metrics.settled(phi[..., 2], band, limit_u)
+    elif stream:  # a smoother's settling needs its record's prefixes, which a stream does not hold: not measured
+        settle, done = np.full(phi.shape[0], np.nan), np.abs(phi[:, -1, 2] - limit_u[-1]) <= band
     else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
         settle, done = _prefix_settling(method, data, vref, init, traj, scn, phi[:, -1, 2], limit_u[-1],
                                         first_run)
@@ -158,8 +177,9 @@ def _align_batch(scn, name, sim, first_run, refusals):
     t_h, phi_h = res.t[idx], phi[:, idx]
     last = res.t >= res.t[-1] - LEVEL_WINDOW_S
     level_ms = np.mean(phi[:, last, :2] ** 2, axis=1)  # (runs, 2) mean square over the window
-    per_run = {"phi_end": phi[:, -1], "level_ms": level_ms, "settle": settle, "settled": done,
-               "sigma_end": np.full((phi.shape[0], 3), np.nan) if res.sigma_phi is None else res.sigma_phi[:, -1]}
+    # copies, not views: a view would keep the batch's whole history alive after it is scored
+    per_run = {"phi_end": phi[:, -1].copy(), "level_ms": level_ms, "settle": settle, "settled": done,
+               "sigma_end": np.full((phi.shape[0], 3), np.nan) if res.sigma_phi is None else res.sigma_phi[:, -1].copy()}
     for feature in scn.features:  # the scenario's metric features: their per-run figures
         per_run.update(feature.collect(res.t, phi, band, limit_u))
     # what a method reports about itself: scalar figures and (R, M) series kept like the history
@@ -240,7 +260,7 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
 
     Parameters are :func:`fusionbench.experiment.run_scenario`'s; here ``n_jobs`` are workers over batches (1, or a
     single batch, runs in this process), ``batch_size`` defaults to as many runs as fit in about 200 MB of IMU
-    samples, and with ``refusals`` a method that refuses the data (ValueError) is recorded in
+    samples (at most :data:`fusionbench.streaming.STREAM_BATCH_RUNS` on a streamed record), and with ``refusals`` a method that refuses the data (ValueError) is recorded in
     ``RunOutput.refused`` (name: message) and left out of the metrics instead of stopping the run.
 
     Returns
@@ -261,6 +281,8 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     n_samples = int(round(duration / scn.dt))
     if batch_size is None:
         batch_size = int(max(1, min(runs, BATCH_BYTES // (n_samples * 48))))
+        if duration >= streaming.STREAM_MIN_S:  # a streamed batch still holds its runs' whole histories
+            batch_size = min(batch_size, streaming.STREAM_BATCH_RUNS)
         if n_jobs != 1:  # at least one batch per worker
             workers = (os.cpu_count() or 1) if n_jobs < 0 else n_jobs
             batch_size = max(1, min(batch_size, -(-runs // workers)))
