@@ -15,6 +15,9 @@ Three measurements, all in one invocation (see ``benchmarks/README.md``):
 3. Peak RSS of one long 100 Hz free-inertial run processed chunk by chunk
    (:func:`fusionbench.imu.simulate_chunks` -> ``Strapdown.run``), in a child process started
    before the parent allocates anything, so its ``ru_maxrss`` is its own.
+4. pyins (``python-ins``, a test dependency) side by side, one run of the same sway: its IMU generation and
+   strapdown beside fusionbench's, and the final attitudes of both strapdowns over the same increments
+   (``benchmarks/_pyins_side.py``; skipped, with nulls in the JSON, when pyins is not installed).
 
 A readable table goes to stdout, then, as the last line, one JSON object with the figures.
 """
@@ -336,6 +339,14 @@ def main(argv=None):
     long = run_long_child(hours, args.free_vertical, args.perfect_imu)
     data, im = bench_imu(runs, duration, args.repeat)
     sd = bench_strapdown(data, duration, args.repeat)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import _pyins_side as pys
+
+    from fusionbench import imu
+
+    py = None
+    if pys.version():
+        py = pys.bench_pyins(sway_trajectory(duration), data, imu.PRESETS["seed000"], DT, args.repeat)
     total = time.perf_counter() - t_all
     load1 = os.getloadavg()[0]
 
@@ -391,6 +402,8 @@ def main(argv=None):
           f"[{', '.join(f'{x:.3g}' for x in long['vel_err_mps'])}] m/s; height error {long['h_err_m']:.3g} m; "
           f"horizontal position error {long['horiz_pos_err_m'] / 1852:.3g} nmi")
     print()
+    pys.report(py, im, sd, runs)
+    print()
     print(f"total benchmark time: {total:.0f} s")
 
     result = {
@@ -423,6 +436,7 @@ def main(argv=None):
         "att_err_20h_arcsec": long["att_err_norm_arcsec"],
         "height_fixed_20h": long["height_fixed"],
         "imu_20h": long["imu"],
+        **pys.json_fields(py, im, sd),
         "total_s": total,
     }
     print(json.dumps(result))
