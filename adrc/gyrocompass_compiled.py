@@ -1,9 +1,9 @@
 """The ADRC gyrocompass's control loop compiled (``engine="numba"`` of :class:`adrc.gyrocompass.ADRCGyrocompass`).
 
 :func:`adrc_steps` runs every control step of all the runs in one numba call: the strapdown over the step's
-samples with the commands held (:func:`fusionbench.compass_compiled.command_step`), the velocity error against the
-reference, the ESO (eq. 9) and the NLSEF (eq. 11) of both level channels, and the azimuth fit's sums
-(:func:`fusionbench.compass_compiled.fit_add`). The fit is read (its 6x6 solve) only where the NumPy loop reads
+samples with the commands held and the velocity error against the reference
+(:func:`fusionbench.compass_compiled.command_step`), the ESO (eq. 9) and the NLSEF (eq. 11) of both level channels,
+and the azimuth fit's sums (:func:`fusionbench.compass_compiled.fit_step`). The fit is read (its 6x6 solve) only where the NumPy loop reads
 it, from the sums kept at those steps, in one batched NumPy call afterwards (:func:`run_compiled`); the attitude
 the method reports is made from the histories by the same NumPy code for both engines. The operations are the
 NumPy loop's, in its order: the two engines give identical results (``tests/test_gyrocompass.py``).
@@ -15,30 +15,19 @@ import numba
 import numpy as np
 
 from fusionbench.compass import fit_azimuth
-from fusionbench.compass_compiled import command_step, fit_add, velocity_error
+from fusionbench.compass_compiled import command_step, fit_step, loop_arrays, work_arrays
 
 from .primitives_compiled import eso3_step, nlsef
 
 
 @numba.njit(cache=True)
-def adrc_steps(sd_state, fit_state, dth, dvel, vref, dt, fit_consts, gains, b0, z, u, fit_from, record, hist_C,
-               tilt, rec_t_sums, rec_sums):
+def adrc_steps(arrays, gains, b0, z, u, fit_from, record, hist_C, tilt, rec_t_sums, rec_sums):
     """All the control steps of :meth:`adrc.gyrocompass.ADRCGyrocompass._align`'s loop, for all runs.
 
     Parameters
     ----------
-    sd_state, fit_state : tuple
-        ``Strapdown.compiled_state()`` of the loop's strapdown (position fixed) and ``AzimuthFit.compiled_state()``,
-        updated in place.
-    dth, dvel : ndarray, shape (steps, R, m, 3)
-        Angle (rad) and velocity (m/s) increments, body frame, one block per step (``CommandLoop.dth``, ``.dv``).
-    vref : ndarray, shape (steps, R, 3) or (0, R, 3)
-        Step-mean reference velocity, ENU, m/s (``CommandLoop.vref``), or none.
-    dt : float
-        Sample interval, s.
-    fit_consts : tuple
-        ``(h, g, wN, wU, 2.0)``: the control step (s), gravity (m/s^2), the horizontal and vertical earth rates
-        (rad/s), and the fit's square exponent (:mod:`fusionbench.compass_compiled`).
+    arrays : tuple
+        The loop's strapdown and azimuth fit (:func:`fusionbench.compass_compiled.loop_arrays`), updated in place.
     gains : ndarray, shape (9,)
         ``beta01, beta02, beta03, delta, delta ** 0.5, delta ** 0.75, r1, h1, c1``.
     b0 : ndarray, shape (2,)
@@ -58,20 +47,14 @@ def adrc_steps(sd_state, fit_state, dth, dvel, vref, dt, fit_consts, gains, b0, 
     rec_t_sums, rec_sums : ndarray, shapes (K, 3), (R, K, 9)
         Written: the fit's sums at the recorded steps.
     """
-    h, g, wN, wU, two = fit_consts
     beta01, beta02, beta03, delta, div_half, div_quarter, r1, h1, c1 = gains
-    C0, v0 = sd_state[0], sd_state[1]
-    t_sums, sums = fit_state[4], fit_state[5]
-    steps, runs, m = dth.shape[0], dth.shape[1], dth.shape[2]
-    cmd = np.empty((runs, m, 3))
-    rec_C, rec_v, rec_p = np.empty((runs, 1, 3, 3)), np.empty((runs, 1, 3)), np.empty((runs, 1, 3))
-    omega, dv = np.empty((runs, 3)), np.empty((runs, 3))
-    applied = np.empty((runs, 2))
+    C0, t_sums, sums, h = arrays[0][0], arrays[1][4], arrays[1][5], arrays[6][0]
+    steps, runs, m = arrays[2].shape[0], arrays[2].shape[1], arrays[2].shape[2]
+    work, omega, dv, applied = work_arrays(runs, m), np.empty((runs, 3)), np.empty((runs, 3)), np.empty((runs, 2))
     for j in range(steps):
         for r in range(runs):
             omega[r, 0], omega[r, 1], omega[r, 2] = u[r, 1], u[r, 0], 0.0
-        command_step(sd_state, dth[j], dvel[j], omega, cmd, dt, rec_C, rec_v, rec_p)
-        velocity_error(v0, vref, j, dv)
+        command_step(arrays, j, omega, work, dv)
         for r in range(runs):
             applied[r, 0], applied[r, 1] = u[r, 1], u[r, 0]  # [w_cE, w_cN] used during this step
             for c in range(2):
@@ -83,7 +66,7 @@ def adrc_steps(sd_state, fit_state, dth, dvel, vref, dt, fit_consts, gains, b0, 
                 tilt[r, j, c] = z2 / b0[c]
             hist_C[r, j] = C0[r]
         if j >= fit_from:
-            fit_add(fit_state, dv, applied, h, g, wN, wU, two)
+            fit_step(arrays, dv, applied)
             k = record[j]
             if k >= 0:
                 rec_t_sums[k] = t_sums
@@ -125,10 +108,8 @@ def run_compiled(loop, fit, gains, b0, fit_from, shot_step, every, hist_C, hist_
     consts = np.array([k["beta01"], k["beta02"], k["beta03"], d, d ** (1.0 - 0.5), d ** (1.0 - 0.25), k["r1"],
                        k["h1"], k["c1"]], dtype=float)
     z, u = np.zeros((R, 2, 3)), np.zeros((R, 2))
-    vref = np.zeros((0, R, 3)) if loop.vref is None else loop.vref
-    adrc_steps(loop.sd.compiled_state(), fit.compiled_state(), loop.dth, loop.dv, vref, loop.sd.dt,
-               (fit.step_s, fit.g, fit.wN, fit.wU, 2.0), consts, np.asarray(b0, dtype=float), z, u, fit_from, record,
-               hist_C, tilt, rec_t_sums, rec_sums)
+    adrc_steps(loop_arrays(loop, fit), consts, np.asarray(b0, dtype=float), z, u, fit_from, record, hist_C, tilt,
+               rec_t_sums, rec_sums)
     loop.omega_c = np.stack([u[:, 1], u[:, 0], np.zeros(R)], axis=-1)
     az = np.full((R, read.size), np.nan)
     ok = read - fit_from + 1 >= 4  # the fit's n at each read: NaN before 4 steps, as AzimuthFit.azimuth

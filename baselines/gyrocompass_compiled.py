@@ -1,8 +1,9 @@
 """The PID gyrocompass's control loop compiled (``engine="numba"`` of :class:`baselines.gyrocompass.PIDGyrocompass`).
 
 :func:`pid_steps` runs the control steps of all the runs in one numba call: the strapdown over the step's samples
-with the commands held (:func:`fusionbench.compass_compiled.command_step`), the velocity error against the
-reference, the azimuth fit's sums until the shot (:func:`fusionbench.compass_compiled.fit_add`), and the staged
+with the commands held and the velocity error against the reference
+(:func:`fusionbench.compass_compiled.command_step`), the azimuth fit's sums until the shot
+(:func:`fusionbench.compass_compiled.fit_step`), and the staged
 level and compass loops of :class:`baselines.gyrocompass.PIDLoops` with their velocity damping, on that object's
 own arrays. It stops at the shot (once per run), where the NumPy code turns the attitude by the fitted azimuth
 (:meth:`baselines.gyrocompass.PIDLoops.shot`, from :func:`run_compiled`), and goes on from there. The operations
@@ -14,29 +15,18 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusionbench.compass_compiled import command_step, fit_add, velocity_error
+from fusionbench.compass_compiled import command_step, fit_step, loop_arrays, velocity_error, work_arrays
 
 
 @numba.njit(cache=True)
-def pid_steps(sd_state, fit_state, dth, dvel, vref, dt, fit_consts, j0, resume, fit_from, shot_step, stage_steps,
-              gains, radius, J, x, damp, omega_c, hist_C):
+def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radius, J, x, damp, omega_c, hist_C):
     """Control steps ``j0, j0 + 1, ...`` of :meth:`baselines.gyrocompass.PIDGyrocompass._align`'s loop, all runs,
     until the shot or the last step.
 
     Parameters
     ----------
-    sd_state, fit_state : tuple
-        ``Strapdown.compiled_state()`` of the loop's strapdown (position fixed) and ``AzimuthFit.compiled_state()``,
-        updated in place.
-    dth, dvel : ndarray, shape (steps, R, m, 3)
-        Angle (rad) and velocity (m/s) increments, body frame, one block per step (``CommandLoop.dth``, ``.dv``).
-    vref : ndarray, shape (steps, R, 3) or (0, R, 3)
-        Step-mean reference velocity, ENU, m/s (``CommandLoop.vref``), or none.
-    dt : float
-        Sample interval, s.
-    fit_consts : tuple
-        ``(h, g, wN, wU, 2.0)``: the control step (s), gravity (m/s^2), the horizontal and vertical earth rates
-        (rad/s), and the fit's square exponent (:mod:`fusionbench.compass_compiled`).
+    arrays : tuple
+        The loop's strapdown and azimuth fit (:func:`fusionbench.compass_compiled.loop_arrays`), updated in place.
     j0 : int
         First step.
     resume : bool
@@ -60,24 +50,20 @@ def pid_steps(sd_state, fit_state, dth, dvel, vref, dt, fit_consts, j0, resume, 
     int
         The shot's step if it stopped there (strapdown and fit done), else the number of steps.
     """
-    h, g, wN, wU, two = fit_consts
-    C0, v0 = sd_state[0], sd_state[1]
-    steps, runs, m = dth.shape[0], dth.shape[1], dth.shape[2]
-    cmd = np.empty((runs, m, 3))
-    rec_C, rec_v, rec_p = np.empty((runs, 1, 3, 3)), np.empty((runs, 1, 3)), np.empty((runs, 1, 3))
-    dv, dv_en = np.empty((runs, 3)), np.empty((runs, 2))
+    C0, v0, h, wN = arrays[0][0], arrays[0][1], arrays[6][0], arrays[6][2]  # wN: OMEGA_IE cos L, as PIDLoops.wN
+    steps, runs, m = arrays[2].shape[0], arrays[2].shape[1], arrays[2].shape[2]
+    work, dv, dv_en = work_arrays(runs, m), np.empty((runs, 3)), np.empty((runs, 2))
     for j in range(j0, steps):
         if not (resume and j == j0):
-            command_step(sd_state, dth[j], dvel[j], omega_c, cmd, dt, rec_C, rec_v, rec_p)
-            velocity_error(v0, vref, j, dv)
+            command_step(arrays, j, omega_c, work, dv)
             if fit_from <= j <= shot_step:
                 for r in range(runs):
                     dv_en[r, 0], dv_en[r, 1] = dv[r, 0] + damp[r, 0], dv[r, 1] + damp[r, 1]
-                fit_add(fit_state, dv_en, omega_c, h, g, wN, wU, two)
+                fit_step(arrays, dv_en, omega_c)
             if j == shot_step:
                 return j
         else:
-            velocity_error(v0, vref, j, dv)  # the shot turned the attitude, not the velocity
+            velocity_error(arrays, j, dv)  # the shot turned the attitude, not the velocity
         stage = 0
         while stage < stage_steps.size and stage_steps[stage] <= j:
             stage += 1
@@ -111,13 +97,10 @@ def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist
 
     Parameters
     ----------
-    loop : fusionbench.compass.CommandLoop
-        The loop (its strapdown is advanced in place; ``loop.omega_c`` is left at the last command, for
-        ``loop.finish()``).
-    fit : fusionbench.compass.AzimuthFit
-        The azimuth fit (fed in place).
-    loops : baselines.gyrocompass.PIDLoops
-        The level and compass loops (stepped in place).
+    loop, fit, loops : CommandLoop, AzimuthFit, PIDLoops
+        The strapdown loop (:mod:`fusionbench.compass`), the azimuth fit it feeds until the shot, and the level and
+        compass loops (:class:`baselines.gyrocompass.PIDLoops`), all advanced in place; ``loop.omega_c`` is left at
+        the last command, for ``loop.finish()``.
     fit_from, shot_step : int
         First step of the fit; step of the shot.
     stage_steps : list of int
@@ -132,15 +115,13 @@ def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist
     ndarray, shape (R,)
         The azimuth of the shot, rad (NaN if the record ends before it).
     """
-    vref = np.zeros((0, loop.R, 3)) if loop.vref is None else loop.vref
-    args = (loop.sd.compiled_state(), fit.compiled_state(), loop.dth, loop.dv, vref, loop.sd.dt,
-            (fit.step_s, fit.g, fit.wN, fit.wU, 2.0))
+    arrays = loop_arrays(loop, fit)
     state = (fit_from, shot_step, np.asarray(stage_steps, dtype=np.int64), np.asarray(gains, dtype=float),
              float(loops.radius), loops.J, loops.x, loops.damp, loops.omega_c, hist_C)
     az_shot = np.full(loop.R, np.nan)
-    j = pid_steps(*args, 0, False, *state)
+    j = pid_steps(arrays, 0, False, *state)
     if j < loop.steps:  # the shot, by the NumPy loop's own code
         az_shot = loops.shot(loop, fit)
-        pid_steps(*args, j, True, *state)
+        pid_steps(arrays, j, True, *state)
     loop.omega_c = loops.omega_c
     return az_shot

@@ -2,9 +2,10 @@
 
 A gyrocompass-type aligner whose whole control loop is compiled (the ``"numba"`` engine of ``adrc``, ``pid``) steps
 the strapdown of a :class:`fusionbench.compass.CommandLoop` with :func:`command_step` and feeds an
-:class:`fusionbench.compass.AzimuthFit` with :func:`fit_add`, both on the objects' own arrays
-(``Strapdown.compiled_state()``, ``AzimuthFit.compiled_state()``), so the objects stay consistent for the NumPy code
-that runs before or after the compiled loop (a one-shot correction, the tail of the record, the azimuth solve).
+:class:`fusionbench.compass.AzimuthFit` with :func:`fit_step`, both on the objects' own arrays
+(:func:`loop_arrays`: ``Strapdown.compiled_state()``, ``AzimuthFit.compiled_state()``), so the objects stay
+consistent for the NumPy code that runs before or after the compiled loop (a one-shot correction, the tail of the
+record, the azimuth solve).
 
 The arithmetic is that of the NumPy methods, operation for operation and in the same order, so both engines give
 identical results (IEEE arithmetic, no fast-math). One detail matters: ``(n h) ** 2`` is Python's float power, C's
@@ -15,45 +16,74 @@ literal exponent into a product, so the exponent reaches :func:`fit_add` at run 
 from __future__ import annotations
 
 import numba
+import numpy as np
 
 from .strapdown import integrate_compiled
 
 
-@numba.njit(cache=True)
-def command_step(sd_state, dth, dvel, omega, cmd, dt, rec_C, rec_v, rec_p):
-    """One control step of a :class:`fusionbench.compass.CommandLoop` (position fixed): the step's samples through
-    the strapdown with the commanded rate held.
+def loop_arrays(loop, fit):
+    """The arrays a compiled control loop works on, as one tuple ``(sd_state, fit_state, dth, dvel, vref, dt,
+    fit_consts)`` (the first argument of :func:`command_step` and :func:`fit_step`).
 
     Parameters
     ----------
-    sd_state : tuple
-        ``Strapdown.compiled_state()``, updated in place.
-    dth, dvel : ndarray, shape (R, m, 3)
-        The step's angle (rad) and velocity (m/s) increments, body frame.
-    omega : ndarray, shape (R, 3)
-        Commanded rate of the computed frame over the step, rad/s, ENU.
-    cmd : ndarray, shape (R, m, 3)
-        Work array.
-    dt : float
-        Sample interval, s.
-    rec_C, rec_v, rec_p : ndarray, shapes (R, 1, 3, 3), (R, 1, 3), (R, 1, 3)
-        Work arrays (the state after the step's last sample).
+    loop : fusionbench.compass.CommandLoop
+        The loop: ``sd_state`` its ``Strapdown.compiled_state()`` (position fixed), updated in place; ``dth``,
+        ``dvel`` its angle (rad) and velocity (m/s) increments, body frame, one block (R, m, 3) per step, shape
+        (steps, R, m, 3); ``vref`` its step-mean reference velocity (steps, R, 3), ENU, m/s, or an empty (0, R, 3);
+        ``dt`` the sample interval, s.
+    fit : fusionbench.compass.AzimuthFit
+        The fit: ``fit_state`` its ``compiled_state()``, updated in place; ``fit_consts`` = ``(h, g, wN, wU, 2.0)``,
+        its step (s), gravity (m/s^2), the horizontal and vertical earth rates (rad/s), and the square's exponent
+        (module docstring).
     """
-    C0, v0, lat0, lon0, h0, vp0, thp, dvp = sd_state
+    vref = np.zeros((0, loop.R, 3)) if loop.vref is None else loop.vref
+    return (loop.sd.compiled_state(), fit.compiled_state(), loop.dth, loop.dv, vref, loop.sd.dt,
+            (fit.step_s, fit.g, fit.wN, fit.wU, 2.0))
+
+
+@numba.njit(cache=True)
+def work_arrays(runs, m):
+    """Work arrays of :func:`command_step` for ``runs`` runs of ``m`` samples a step."""
+    return np.empty((runs, m, 3)), np.empty((runs, 1, 3, 3)), np.empty((runs, 1, 3)), np.empty((runs, 1, 3))
+
+
+@numba.njit(cache=True)
+def command_step(arrays, j, omega, work, dv):
+    """Control step ``j`` of a :class:`fusionbench.compass.CommandLoop`, as its iterator makes it: the step's samples
+    through the strapdown with the commanded rate ``omega`` (R, 3), rad/s, ENU, held; ``dv`` (R, 3) is then the
+    velocity error against the reference, m/s (the velocity itself without one).
+
+    ``arrays`` is :func:`loop_arrays`'s tuple, ``work`` :func:`work_arrays`'s.
+    """
+    C0, v0, lat0, lon0, h0, vp0, thp, dvp = arrays[0]
+    dth, dvel, dt = arrays[2][j], arrays[3][j], arrays[5]
+    cmd, rec_C, rec_v, rec_p = work
     runs, m = dth.shape[0], dth.shape[1]
     for r in range(runs):
         for k in range(m):
             cmd[r, k, 0], cmd[r, k, 1], cmd[r, k, 2] = omega[r, 0], omega[r, 1], omega[r, 2]
     integrate_compiled(C0, v0, lat0, lon0, h0, vp0, thp, dvp, dth, dvel, cmd, dt, True, True, m, rec_C, rec_v, rec_p)
+    velocity_error(arrays, j, dv)
 
 
 @numba.njit(cache=True)
-def velocity_error(v_n, vref, j, out):
-    """``out`` (R, 3) = the velocity ``v_n`` (R, 3) less the reference of step ``j`` (``CommandLoop.vref``, shape
-    (steps, R, 3), m/s; an empty first axis: no reference), as :class:`fusionbench.compass.CommandLoop` yields it."""
+def velocity_error(arrays, j, dv):
+    """``dv`` (R, 3) = the strapdown's velocity less the reference of step ``j`` (m/s; the velocity itself without
+    a reference), as :class:`fusionbench.compass.CommandLoop` yields it; ``arrays`` is :func:`loop_arrays`'s tuple."""
+    v_n, vref = arrays[0][1], arrays[4]
     for r in range(v_n.shape[0]):
         for i in range(3):
-            out[r, i] = v_n[r, i] - vref[j, r, i] if vref.shape[0] else v_n[r, i]
+            dv[r, i] = v_n[r, i] - vref[j, r, i] if vref.shape[0] else v_n[r, i]
+
+
+@numba.njit(cache=True)
+def fit_step(arrays, dv_en, w_c):
+    """Add a step to the loop's :class:`fusionbench.compass.AzimuthFit` (:func:`fit_add`): the velocity errors
+    ``dv_en`` (R, >= 2) [dvE, dvN], m/s, at the end of the step, the commands ``w_c`` (R, >= 2) [w_cE, w_cN],
+    rad/s, applied during it; ``arrays`` is :func:`loop_arrays`'s tuple."""
+    h, g, wN, wU, two = arrays[6]
+    fit_add(arrays[1], dv_en, w_c, h, g, wN, wU, two)
 
 
 @numba.njit(cache=True)
