@@ -3,10 +3,11 @@
 :func:`adrc_steps` runs every control step of all the runs in one numba call: the strapdown over the step's
 samples with the commands held and the velocity error against the reference
 (:func:`fusionbench.compass_compiled.command_step`), the ESO (eq. 9) and the NLSEF (eq. 11) of both level channels,
-and the azimuth fit's sums (:func:`fusionbench.compass_compiled.fit_step`). The fit is read (its 6x6 solve) only where the NumPy loop reads
-it, from the sums kept at those steps, in one batched NumPy call afterwards (:func:`run_compiled`); the attitude
-the method reports is made from the histories by the same NumPy code for both engines. The operations are the
-NumPy loop's, in its order: the two engines give identical results (``tests/test_gyrocompass.py``).
+and the azimuth fit's sums (:func:`fusionbench.compass_compiled.fit_step`). The fit is read (its 6x6 solve) only
+where the NumPy loop reads it, from the sums kept at those steps, in one batched NumPy call afterwards
+(:func:`run_compiled`); the attitude the method reports is made from the histories by the same NumPy code for both
+engines. The operations are the NumPy loop's, in its order: the two engines give identical results
+(``tests/test_gyrocompass.py``).
 """
 
 from __future__ import annotations

@@ -179,5 +179,6 @@ def test_the_compiled_loop_gives_the_numpy_loops_results(method, base):
 
 @pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass, ESOTDAligner])
 def test_an_unknown_engine_is_refused_in_one_line(method):
-    with pytest.raises(ValueError, match=r"^[a-z-]+: option engine: expected one of \('numba', 'numpy'\), found 'cuda'$"):
+    refusal = r"^[a-z-]+: option engine: expected one of \('numba', 'numpy'\), found 'cuda'$"
+    with pytest.raises(ValueError, match=refusal):
         method(engine="cuda")
