@@ -257,9 +257,8 @@ def run_compiled(est, sd, dth_b, dv_b, vref_b, hist_C, hist_psi, hist_fb, hist_y
     e.beta1, e.beta2 = e.beta1.copy(), e.beta2.copy()  # written in place (they may be the floors' own arrays)
     alpha, delta = (np.broadcast_to(x, (2,)).astype(float) for x in (e.alpha, e.delta))
     eso_consts = (est.b1_floor, est.b2_floor, alpha, delta, delta ** (1.0 - alpha))
-    zeros = np.zeros
+    zeros, fe = np.zeros, est.eso_f if is_ls else None
     if is_ls:
-        fe = est.eso_f
         fe.beta1, fe.beta2 = fe.beta1.copy(), fe.beta2.copy()
         ls = (est.td_ls.S, zeros((2, R)), est.td_p.S, zeros((2, R)),
               np.stack([est.X_int, est.Xb_int, est.M_int, est.XX_int, est.s_jumps, zeros(R)]), zeros((3, R)), est.F_int)
