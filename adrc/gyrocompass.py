@@ -97,9 +97,10 @@ import scipy.linalg
 from fusionbench.aligner import AlignmentResult, Site, Supports, variant
 from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
-from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
 from fusionbench.strapdown import rodrigues
 
+from .gyrocompass_compiled import run_compiled
 from .primitives import ExtendedStateObserver, nlsef
 
 _H = 0.02  # the printed step, s
@@ -232,6 +233,10 @@ class ADRCGyrocompass(AlignerBase):
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
         rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
+    engine : {"numba", "numpy"}
+        The whole control loop (strapdown, ESO, NLSEF, azimuth fit) compiled, all runs in one call
+        (:mod:`adrc.gyrocompass_compiled`; default), or the NumPy loop over control steps, the reference: the same
+        operations in the same order, identical results.
     """
 
     positive_options = ("step_s", "h1", "c0", "c1", "delta", "eso_bandwidth", "shot_s")
@@ -244,7 +249,8 @@ class ADRCGyrocompass(AlignerBase):
 
     def __init__(self, step_s=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  eso_bandwidth=0.13, r1=None, c1=0.8, h1=4.0, level="observer", fit_from_s=10.0, shot_s=40.0,
-                 refine=True, imu=None):
+                 refine=True, imu=None, engine="numba"):
+        self.engine = check_engine(self.name, engine)
         self.spec = None if imu is None else load_spec(imu)
         self.step_s = float(step_s)
         self.c0, self.c1, self.delta = c0, c1, float(delta)
@@ -288,18 +294,39 @@ class ADRCGyrocompass(AlignerBase):
                              f"(spectral radius {rho:.3g} in the linear zone); its gains are for a {self.step_s:g} s step")
         k = self.gains(h)
         b0 = np.array([-g, g])  # channels: [east (drives w_cN), north (drives w_cE)]
-        eso = ExtendedStateObserver((R, 2), h, k["beta01"], k["beta02"], k["beta03"], self.delta, b0)
-        u = np.zeros((R, 2))
         fit = AzimuthFit(R, h, site.lat, g)
         fit_from = int(round(self.fit_from_s / h))
         shot_step = max(int(round(self.shot_s / h)), fit_from + 4)
         hist_t = np.empty(loop.records)
+        hist_t[:loop.steps] = loop.t[loop.m - 1::loop.m][:loop.steps]  # the ends of the steps
         hist_C = np.empty((R, loop.records, 3, 3))
         hist_az = np.full((R, loop.records), np.nan)
-        az_shot = np.full(R, np.nan)
-        az = np.full(R, np.nan)
         every = max(1, int(round(0.1 / h)))  # the azimuth estimate is refreshed at 10 Hz
         tilt = np.zeros((R, loop.records, 2))  # the ESO's tilt estimate z2 / b0 = [ay, ax], rad
+        if self.engine == "numba":
+            az_shot = run_compiled(loop, fit, {**k, "delta": self.delta, "c1": self.c1}, b0, fit_from, shot_step,
+                                   every, hist_C, hist_az, tilt)
+        else:
+            az_shot = self._run_numpy(loop, fit, k, b0, fit_from, shot_step, every, hist_C, hist_az, tilt)
+        t_last = loop.finish()  # the samples after the last ADRC step: the result ends at the last sample
+        if t_last is not None:
+            hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
+            hist_az[:, -1], tilt[:, -1] = hist_az[:, -2], tilt[:, -2]
+        # the reported attitude at each step, from that step's loop attitude and estimates
+        if self.level == "observer":  # turn the computed frame back by [ax, ay, 0] about its own axes
+            hist_C = rodrigues(np.stack([tilt[..., 1], tilt[..., 0], np.zeros(tilt.shape[:2])], axis=-1)) @ hist_C
+        az_used = hist_az if self.refine else np.broadcast_to(az_shot[:, None], hist_az.shape)
+        hist_C[:, shot_step:] = correct_azimuth(hist_C[:, shot_step:], az_used[:, shot_step:])  # eqs. 17-18
+        return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot, "azimuth_estimate_rad": hist_az})
+
+    def _run_numpy(self, loop, fit, k, b0, fit_from, shot_step, every, hist_C, hist_az, tilt):
+        """The control loop of :meth:`_align` with the NumPy engine (arguments and result as
+        :func:`adrc.gyrocompass_compiled.run_compiled`): one step at a time, NumPy over the runs."""
+        R, h = loop.R, loop.step_s
+        eso = ExtendedStateObserver((R, 2), h, k["beta01"], k["beta02"], k["beta03"], self.delta, b0)
+        u = np.zeros((R, 2))
+        az_shot = np.full(R, np.nan)
+        az = np.full(R, np.nan)
         for j, t, dv in loop:
             applied = np.stack([u[:, 1], u[:, 0]], axis=-1)  # [w_cE, w_cN] used during this period
             z1, z2, z3 = eso.update(dv[:, :2], u)
@@ -313,19 +340,9 @@ class ADRCGyrocompass(AlignerBase):
                 if j == shot_step:
                     az_shot = az
             loop.omega_c = np.stack([u[:, 1], u[:, 0], np.zeros(R)], axis=-1)
-            hist_t[j] = t
             hist_C[:, j] = loop.sd.state.C_bn
             tilt[:, j] = z2 / b0
-        t_last = loop.finish()  # the samples after the last ADRC step: the result ends at the last sample
-        if t_last is not None:
-            hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
-            hist_az[:, -1], tilt[:, -1] = hist_az[:, -2], tilt[:, -2]
-        # the reported attitude at each step, from that step's loop attitude and estimates
-        if self.level == "observer":  # turn the computed frame back by [ax, ay, 0] about its own axes
-            hist_C = rodrigues(np.stack([tilt[..., 1], tilt[..., 0], np.zeros(tilt.shape[:2])], axis=-1)) @ hist_C
-        az_used = hist_az if self.refine else np.broadcast_to(az_shot[:, None], hist_az.shape)
-        hist_C[:, shot_step:] = correct_azimuth(hist_C[:, shot_step:], az_used[:, shot_step:])  # eqs. 17-18
-        return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot, "azimuth_estimate_rad": hist_az})
+        return az_shot
 
 
 #: ``adrc-paper``: seed 000's printed parameters (h = 0.02 s, h1 = 10 h, the ESO of eq. 9 as printed, the level

@@ -275,9 +275,10 @@ from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.compass import MAX_LATITUDE_DEG
+from fusionbench.compass import MAX_LATITUDE_DEG, check_engine
 from fusionbench.strapdown import NavState, Strapdown
 
+from .moving_base_compiled import run_compiled
 from .primitives import FSTTrackingDifferentiator, SecondOrderESO, fst  # noqa: F401 (re-exported)
 
 __all__ = ["fst", "FSTTrackingDifferentiator", "SecondOrderESO", "LeastSquaresDifferentiator", "ESOTDEstimator",
@@ -658,6 +659,9 @@ class ESOTDAligner(AlignerBase):
         Without a reference, the mean specific force may exceed normal gravity by this much (in g,
         3e-3) before the base is taken as accelerating and refused (a constant acceleration a raises it
         by a^2 / 2 g^2: 4.9e-3 at 0.1 g).
+    engine : {"numba", "numpy"}
+        The step loop compiled, all runs in one call between feedbacks (:mod:`adrc.moving_base_compiled`; default),
+        or the NumPy loop over steps, the reference: the same operations in the same order, identical results.
 
     Attributes
     ----------
@@ -679,8 +683,8 @@ class ESOTDAligner(AlignerBase):
     def __init__(self, step_s=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
                  beta21=0.1, beta22=0.0025, eso_start="ls", td="ls", td_h1=None, td_r=500.0, td_start_s="auto",
                  td_min_s=10.0, td_memory_s=None, force_h1=5.0, feedback_from_s="auto", feedback_every_s=10.0,
-                 feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3, imu=None):
-        self.spec = None if imu is None else load_spec(imu)
+                 feedback_limit_deg=15.0, coarse_s=60.0, max_gravity_excess=3e-3, imu=None, engine="numba"):
+        self.spec, self.engine = None if imu is None else load_spec(imu), check_engine(self.name, engine)
         self.step_s = float(step_s)
         if not self.step_s > 0:
             raise ValueError(f"step_s: expected a positive step in s, found {step_s}")
@@ -785,10 +789,8 @@ class ESOTDAligner(AlignerBase):
                                     lambda rest, vr, C0, v0: self.align(rest, site, vr, C0))
         if vref is None:
             self._check_not_accelerating(dvel, imu.dt, site)
-        dt = imu.dt
-        C0 = init
-        if vref is None:
             vref = np.zeros((R, t.size, 3))
+        dt = imu.dt
         m = max(1, int(round(self.step_s / dt)))
         h = m * dt
         steps = t.size // m
@@ -800,21 +802,20 @@ class ESOTDAligner(AlignerBase):
         # initial velocity at t0: the reference extrapolated back one increment
         v0 = vref[:, 0] - (vref[:, 1] - vref[:, 0]) if t.size > 1 else vref[:, 0]
         v0 = v0 * np.array([1.0, 1.0, 0.0])
-        sd = Strapdown(NavState.broadcast(R, C0, v_n=v0, lat=site.lat, lon=site.lon, h=site.h), dt,
+        sd = Strapdown(NavState.broadcast(R, init, v_n=v0, lat=site.lat, lon=site.lon, h=site.h), dt,
                        position_fixed=False, height_fixed=True)
 
         est = ESOTDEstimator(self, R, h, dt, m)
         records = steps + (t.size > steps * m)  # one more for the samples after the last step (time rule)
-        hist_t = np.empty(records)
-        hist_C = np.empty((R, records, 3, 3))
-        hist_psi = np.empty((R, records, 3))
-        hist_fb = np.empty((R, records, 3))
-        hist_y = np.empty((R, records, 2))
-        for j in range(steps):
+        hist_t, hist_C = np.empty(records), np.empty((R, records, 3, 3))
+        hist_t[:steps] = t[m - 1:steps * m:m]  # the ends of the steps
+        hist_psi, hist_fb, hist_y = (np.empty((R, records, n)) for n in (3, 3, 2))
+        if self.engine == "numba":  # the loop below, compiled
+            run_compiled(est, sd, dth_b, dv_b, vref_b, hist_C, hist_psi, hist_fb, hist_y)
+        for j in range(steps) if self.engine == "numpy" else ():
             out = sd.run(dth_b[j], dv_b[j], record_every=1)
             st = sd.state
             psi = est.step(j, out["C_bn"], out["v_n"], dv_b[j], vref_b[j], st)
-            hist_t[j] = t[(j + 1) * m - 1]
             hist_C[:, j] = apply_misalignment(st.C_bn, -psi)
             hist_y[:, j] = est.y
             # velocity reset to the reference (keeps eq. 1's neglected dv / R terms negligible)
@@ -846,7 +847,6 @@ def _slow_rate(beta1, beta2):
     if disc < 0:
         return beta1 / 2.0
     return (beta1 - np.sqrt(disc)) / 2.0
-
 
 
 #: ``eso-td-paper``: seed 001's printed parameters (ESO 0.6 / 0.08 from rest, fst TD with h1 = 5 h, open loop). On a

@@ -39,9 +39,14 @@ def fhan(x1, x2, r, h, c=1.0):
         The acceleration that brings the double integrator x1'' = u, started at (x1, x2), to the
         origin fastest under |u| <= r in discrete steps h (negative when x1 is positive, at rest).
     """
-    x1 = np.asarray(x1, dtype=float)
+    return fhan_arithmetic(np.asarray(x1, dtype=float), np.asarray(x2, dtype=float), r, h, c)
+
+
+def fhan_arithmetic(x1, x2, r, h, c):
+    """The arithmetic of :func:`fhan` on floats or float arrays, free of conversions so that numba compiles it
+    unchanged for one value (:mod:`adrc.primitives_compiled`: both engines then share every operation)."""
     d = r * h * h
-    a0 = h * c * np.asarray(x2, dtype=float)
+    a0 = h * c * x2
     y = x1 + a0
     a1 = np.sqrt(d * (d + 8.0 * np.abs(y)))
     a2 = a0 + np.sign(y) * (a1 - d) / 2.0

@@ -48,7 +48,9 @@ from fusionbench import earth
 from fusionbench.aligner import AlignmentResult, Site, Supports
 from fusionbench.aligner_base import AlignerBase
 from fusionbench.imu import load_spec
-from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
+
+from .gyrocompass_compiled import run_compiled
 
 
 def sigma_of(td, xi):
@@ -108,6 +110,15 @@ class PIDLoops:
         self.damp = np.zeros((runs, 2))
         self.omega_c = np.zeros((runs, 3))
 
+    def shot(self, loop, fit):
+        """The one-shot azimuth correction (eqs. 17-18): turn the attitude of ``loop``
+        (:class:`fusionbench.compass.CommandLoop`) by the azimuth of ``fit`` (:class:`fusionbench.compass.AzimuthFit`)
+        and shift the level integrators (:meth:`frame_turned`); returns that azimuth (R,), rad."""
+        az = fit.azimuth()
+        loop.sd.state.C_bn[:] = correct_azimuth(loop.sd.state.C_bn, az)
+        self.frame_turned(az)
+        return az
+
     def frame_turned(self, az):
         """The computed frame was turned by the azimuth ``az`` (R,) rad: shift the level integrators by the known
         change of the earth-rate terms (eq. 19), so the level channels stay steady."""
@@ -162,6 +173,10 @@ class PIDGyrocompass(AlignerBase):
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
         rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
+    engine : {"numba", "numpy"}
+        The whole control loop (strapdown, azimuth fit, level and compass loops) compiled, all runs in one call
+        (:mod:`baselines.gyrocompass_compiled`; default), or the NumPy loop over control steps, the reference: the
+        same operations in the same order, identical results.
     """
 
     positive_options = ("step_s", "shot_s", "level_td_s")
@@ -174,7 +189,9 @@ class PIDGyrocompass(AlignerBase):
     description = "classical gyrocompass: 3rd-order level loops and compass loop (PSINS design), staged from any heading"
 
     def __init__(self, step_s=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
-                 compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None):
+                 compass_stages=((90.0, 50.0, 100.0), (160.0, 50.0, 250.0), (260.0, 50.0, 600.0)), imu=None,
+                 engine="numba"):
+        self.engine = check_engine(self.name, engine)
         self.spec = None if imu is None else load_spec(imu)
         self.step_s, self.xi = float(step_s), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
@@ -205,24 +222,27 @@ class PIDGyrocompass(AlignerBase):
         stage_steps = [max(shot_step + 1, int(round(st[0] / h))) for st in self.compass_stages]
         loops = PIDLoops(R, h, radius, wN)
         hist_t = np.empty(loop.records)
+        hist_t[:loop.steps] = loop.t[loop.m - 1::loop.m][:loop.steps]  # the ends of the steps
         hist_C = np.empty((R, loop.records, 3, 3))
-        az_shot = np.full(R, np.nan)
-        for j, t, dv in loop:
-            if j >= fit_from and j <= shot_step:
-                fit.add(dv[:, :2] + loops.damp, loops.omega_c[:, :2])
-            if j == shot_step:
-                az_shot = fit.azimuth()
-                loop.sd.state.C_bn[:] = correct_azimuth(loop.sd.state.C_bn, az_shot)
-                loops.frame_turned(az_shot)
-            stage = int(np.searchsorted(stage_steps, j, side="right"))
-            level_td = self.level_td_s if stage == 0 else self.compass_stages[stage - 1][1]
-            compass = None if stage == 0 else compass_gains(self.compass_stages[stage - 1][2], self.xi, ws2, g)
-            dE, dN = loops.step(dv[:, 0], dv[:, 1], level_gains(level_td, self.xi, ws2, g), compass)
-            loop.sd.state.v_n[:, 0] -= dE
-            loop.sd.state.v_n[:, 1] -= dN
-            loop.omega_c = loops.omega_c
-            hist_t[j] = t
-            hist_C[:, j] = loop.sd.state.C_bn
+        # per stage (0: levelling): the level gains and, from the first compass stage, the compass gains
+        gains = [level_gains(self.level_td_s, self.xi, ws2, g) + (0.0,) * 4]
+        gains += [level_gains(lv, self.xi, ws2, g) + compass_gains(az, self.xi, ws2, g)
+                  for _, lv, az in self.compass_stages]
+        if self.engine == "numba":
+            az_shot = run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C)
+        else:
+            az_shot = np.full(R, np.nan)
+            for j, t, dv in loop:
+                if j >= fit_from and j <= shot_step:
+                    fit.add(dv[:, :2] + loops.damp, loops.omega_c[:, :2])
+                if j == shot_step:
+                    az_shot = loops.shot(loop, fit)
+                stage = int(np.searchsorted(stage_steps, j, side="right"))
+                dE, dN = loops.step(dv[:, 0], dv[:, 1], gains[stage][:3], None if stage == 0 else gains[stage][3:])
+                loop.sd.state.v_n[:, 0] -= dE
+                loop.sd.state.v_n[:, 1] -= dN
+                loop.omega_c = loops.omega_c
+                hist_C[:, j] = loop.sd.state.C_bn
         t_last = loop.finish()  # the samples after the last control step: the result ends at the last sample
         if t_last is not None:
             hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn

@@ -29,6 +29,17 @@ from .strapdown import NavState, Strapdown
 #: Highest |latitude| of the gyrocompass-type aligners, deg (their ``max_latitude_deg``): they lose the compass
 #: effect toward the poles (wN = OMEGA_IE cos L -> 0).
 MAX_LATITUDE_DEG = 80.0
+#: Engines of the aligners whose control loop is compiled (their ``engine`` option): the whole loop in numba
+#: (:mod:`fusionbench.compass_compiled` and the methods' kernels; the default), or the NumPy loop over control steps,
+#: the reference the tests compare it with (the same arithmetic in the same order: identical results).
+ENGINES = ("numba", "numpy")
+
+
+def check_engine(method, engine):
+    """``engine`` if it is one of :data:`ENGINES`, else a one-line ValueError naming ``method`` and the option."""
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise ValueError(f"{method}: option engine: expected one of {ENGINES}, found {engine!r}")
+    return engine
 
 
 class AzimuthFit:
@@ -78,14 +89,24 @@ class AzimuthFit:
         self.wN = earth.OMEGA_IE * np.cos(lat)
         self.wU = earth.OMEGA_IE * np.sin(lat)
         self.R = runs
-        self.n = 0
         self.I = np.zeros((runs, 3))       # integrals of [w_cE, w_cN, 1]
         self.D = np.zeros((runs, 3))       # double integrals of the same
         self.V = np.zeros((runs, 2))       # integrals of [dvE, dvN] (coupling and Coriolis terms)
-        self._prev_dv = None
+        self._prev_dv = np.zeros((runs, 2))  # the velocity errors of the last step (read once n > 0)
         self.t_sums = np.zeros(3)          # sums of tau^0, tau^1, tau^2
         # per-run sums: P, tau P, P^2, yN, tau yN, yE, tau yE, P yN, P yE
         self.sums = np.zeros((runs, 9))
+        self._count = np.zeros(1, dtype=np.int64)  # n, in an array that compiled loops update in place
+
+    @property
+    def n(self):
+        """Number of steps added so far."""
+        return int(self._count[0])
+
+    def compiled_state(self):
+        """The arrays :func:`fusionbench.compass_compiled.fit_add` updates in place, in its argument order:
+        ``I, D, V, prev_dv, t_sums, sums, count`` (a compiled loop adds its steps to this very fit)."""
+        return self.I, self.D, self.V, self._prev_dv, self.t_sums, self.sums, self._count
 
     def add(self, dv_en, w_c_en):
         """Add one step.
@@ -105,7 +126,7 @@ class AzimuthFit:
             self.D += self.I * h + 0.5 * rate * h * h
             self.I += rate * h
             self.V += 0.5 * (self._prev_dv + dv_en) * h
-        self._prev_dv = dv_en.copy()
+        self._prev_dv[:] = dv_en
         tau = self.n * h / self._SCALE
         g = self.g
         P = self.D[:, 2] / self._SCALE**2
@@ -114,28 +135,50 @@ class AzimuthFit:
         yE = dv_en[:, 0] - cross[:, 1] + g * self.D[:, 1] + 0.5 * g * self.wN * (self.n * h) ** 2
         self.t_sums += (1.0, tau, tau * tau)
         self.sums += np.stack([P, tau * P, P * P, yN, tau * yN, yE, tau * yE, P * yN, P * yE], axis=-1)
-        self.n += 1
+        self._count[0] += 1
 
     def azimuth(self):
         """The azimuth error az (R,) rad, in (-pi, pi], or NaN before 4 samples."""
         if self.n < 4:
             return np.full(self.R, np.nan)
-        k = self.g * self.wN * self._SCALE**2
-        s0, s1, s2 = self.t_sums
-        P, tP, PP, yN, tyN, yE, tyE, PyN, PyE = np.moveaxis(self.sums, -1, 0)
-        # rows of xN = [1, tau, 0, 0, -k P, 0] and xE = [0, 0, 1, tau, 0, k P], summed products
-        M = np.zeros((self.R, 6, 6))
-        M[:, 0, 0] = M[:, 2, 2] = s0
-        M[:, 0, 1] = M[:, 1, 0] = M[:, 2, 3] = M[:, 3, 2] = s1
-        M[:, 1, 1] = M[:, 3, 3] = s2
-        M[:, 0, 4] = M[:, 4, 0] = -k * P
-        M[:, 1, 4] = M[:, 4, 1] = -k * tP
-        M[:, 2, 5] = M[:, 5, 2] = k * P
-        M[:, 3, 5] = M[:, 5, 3] = k * tP
-        M[:, 4, 4] = M[:, 5, 5] = k * k * PP
-        b = np.stack([yN, tyN, yE, tyE, -k * PyN, k * PyE], axis=-1)
-        theta = np.linalg.solve(M, b[..., None])[..., 0]
-        return np.angle(np.exp(1j * np.arctan2(theta[:, 4], theta[:, 5])))
+        return fit_azimuth(self.t_sums, self.sums, self.g, self.wN)
+
+
+def fit_azimuth(t_sums, sums, g, wN):
+    """The azimuth error (rad, in (-pi, pi]) of :class:`AzimuthFit`'s sums after at least 4 steps, batched.
+
+    Parameters
+    ----------
+    t_sums : ndarray, shape (..., 3)
+        Sums of tau^0, tau^1, tau^2 (``AzimuthFit.t_sums``; one row per fit state).
+    sums : ndarray, shape (R, ..., 9)
+        The per-run sums (``AzimuthFit.sums``), the middle axes those of ``t_sums``: a history of fit states
+        solves in one call (the same 6x6 solve per state as one at a time).
+    g : float
+        Gravity, m/s^2.
+    wN : float
+        Horizontal earth rate OMEGA_IE cos L, rad/s.
+
+    Returns
+    -------
+    ndarray, shape (R, ...)
+    """
+    k = g * wN * AzimuthFit._SCALE**2
+    s0, s1, s2 = np.moveaxis(t_sums, -1, 0)
+    P, tP, PP, yN, tyN, yE, tyE, PyN, PyE = np.moveaxis(sums, -1, 0)
+    # rows of xN = [1, tau, 0, 0, -k P, 0] and xE = [0, 0, 1, tau, 0, k P], summed products
+    M = np.zeros(sums.shape[:-1] + (6, 6))
+    M[..., 0, 0] = M[..., 2, 2] = s0
+    M[..., 0, 1] = M[..., 1, 0] = M[..., 2, 3] = M[..., 3, 2] = s1
+    M[..., 1, 1] = M[..., 3, 3] = s2
+    M[..., 0, 4] = M[..., 4, 0] = -k * P
+    M[..., 1, 4] = M[..., 4, 1] = -k * tP
+    M[..., 2, 5] = M[..., 5, 2] = k * P
+    M[..., 3, 5] = M[..., 5, 3] = k * tP
+    M[..., 4, 4] = M[..., 5, 5] = k * k * PP
+    b = np.stack([yN, tyN, yE, tyE, -k * PyN, k * PyE], axis=-1)
+    theta = np.linalg.solve(M, b[..., None])[..., 0]
+    return np.angle(np.exp(1j * np.arctan2(theta[..., 4], theta[..., 5])))
 
 
 def correct_azimuth(C_bn, alpha_z):

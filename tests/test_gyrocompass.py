@@ -7,13 +7,15 @@ import sys
 import numpy as np
 import pytest
 
-from adrc.gyrocompass import ADRCGyrocompass
+from adrc.gyrocompass import ADRCGyrocompass, ADRCPaper
+from adrc.moving_base import ESOTDAligner
 from baselines.gyrocompass import PIDGyrocompass
 from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
 from fusionbench.aligner import Site
 from fusionbench.compass import AzimuthFit, correct_azimuth
-from fusionbench.imu import PRESETS, IMUSpec, simulate
+from fusionbench.imu import PRESETS, IMUSpec, VelocityReferenceSpec, simulate, simulate_vref
 from fusionbench.imufiles import write_csv
+from tests.conftest import engines_agree
 
 D = np.pi / 180
 
@@ -152,3 +154,31 @@ def test_noisy_pyins_recording_at_10_hz_lands_on_the_limits_within_the_noise(met
     sigma_az = 0.005 * units.DEG_PER_SQRT_H / (earth.OMEGA_IE * np.cos(site.lat) * np.sqrt(280.0))
     assert abs(phi[2] - lim[2]) < 3 * sigma_az
     assert np.abs(phi[:2] - lim[:2]).max() < 0.05 * units.ARCMIN
+
+
+@pytest.mark.parametrize("base", ["static", "sway"])
+@pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass, ADRCPaper])
+def test_the_compiled_loop_gives_the_numpy_loops_results(method, base):
+    # 3 runs of 100.05 s: the ADRC's shot (40 s), the PID's shot (70 s) and first compass stage (90 s), and a tail
+    # of 5 samples after the last control step; static: levelled start, no reference; sway: from 180, -179 and
+    # 90 deg with a 0.05 m/s reference
+    lat = 34 * D
+    sway = {"amplitude": (5 * D, 7 * D, 9 * D), "frequency": (0.5, 0.3, 0.2)} if base == "sway" else {}
+    tr = tj.Trajectory(lat, 0.5, 100.0, tj.EulerSway(mean=(1 * D, -2 * D, -70 * D), **sway), duration=100.05)
+    data = simulate(tr, PRESETS["seed000"], 0.01, runs=3, seed=2)
+    kw = {}
+    if base == "sway":
+        C0 = tr.truth([0.0]).C_bn[0]
+        kw["init"] = np.stack([attitude.euler_platform_to_dcm(np.radians([3.0, 3.0, a])) @ C0 for a in (180, -179, 90)])
+        kw["vref"] = simulate_vref(tr, VelocityReferenceSpec((0.05,) * 3), data.increments()[0], runs=3, seed=2)
+    a = method(engine="numpy").align(data, Site(lat, 0.5, 100.0), **kw)
+    b = method(engine="numba").align(data, Site(lat, 0.5, 100.0), **kw)
+    assert a.t[-1] == pytest.approx(100.05) and np.isfinite(b.extra["azimuth_shot_rad"]).all()
+    engines_agree(a, b)
+
+
+@pytest.mark.parametrize("method", [PIDGyrocompass, ADRCGyrocompass, ESOTDAligner])
+def test_an_unknown_engine_is_refused_in_one_line(method):
+    refusal = r"^[a-z-]+: option engine: expected one of \('numba', 'numpy'\), found 'cuda'$"
+    with pytest.raises(ValueError, match=refusal):
+        method(engine="cuda")
