@@ -175,6 +175,8 @@ one the last sample).
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 import gtsam
@@ -396,6 +398,14 @@ class FactorGraphAligner(AlignerBase):
         e = velocity_error(R, v, b, priors["z"], priors["U"], priors["Mb"])
         r = np.linalg.norm(e, axis=1) / (self.vref_sigma * np.sqrt(priors["v_var"]))
         return np.where(r <= self.huber_k, 1.0, self.huber_k / np.maximum(r, 1e-300))
+
+    def estimate_only(self):
+        """This aligner without the marginal covariances (``marginals=False``): the same attitudes, a third
+        cheaper, for the runner's settling of a smoother (:func:`fusionbench.runner._prefix_settling`), which reads
+        only the final attitude of each prefix."""
+        lean = copy.copy(self)
+        lean.marginals = False
+        return lean
 
     def _params(self, g, omega):
         """PreintegrationParams: z-up (ENU) gravity g (m/s^2), Coriolis rate omega (ENU, rad/s), noise densities."""

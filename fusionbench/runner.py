@@ -218,10 +218,13 @@ def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end, f
     end after which every later one (and the whole record) is inside the band. Prefixes are aligned from the
     end backwards until every run has left the band (or the shortest prefix the method accepts is reached).
     Only runs ``first_run + i < PREFIX_RUNS`` are measured (the same runs whatever the batching); the others
-    get NaN.
+    get NaN. A method with ``estimate_only()`` aligns the prefixes with that copy (the same attitudes without the
+    uncertainty figures: gtsam's marginals).
 
     Returns ``(settle (R,) s, settled (R,) bool)``; ``settled`` (inside the band at the end) for every run."""
     band = scn.settling_band_arcmin * units.ARCMIN
+    # only the final attitudes are read: a method may offer a cheaper copy without its uncertainty figures
+    method = method.estimate_only() if callable(getattr(method, "estimate_only", None)) else method
     t_inc = data.increments()[0]
     first_out = np.abs(phiu_end - limit_end) > band  # the whole record: not settled at all
     n_meas = int(np.clip(PREFIX_RUNS - first_run, 0, data.runs))
