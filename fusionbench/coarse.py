@@ -35,7 +35,9 @@ from .imu import load_spec
 from .imudata import IMUData
 from .strapdown import body_increments
 
+from .coarse_kernel import body_pass
 from .coarse_level import relevel
+from .compass import check_engine
 
 
 def triad(f_b, w_b):
@@ -271,6 +273,9 @@ class InertialCoarseAligner(AlignerBase):
         four sub-windows (a base moving a little, e.g. a moored ship), over 2.
     imu : str, path or IMUSpec, optional
         The IMU, used only to refuse when its gyro bias hides the earth rate; None: not checked.
+    engine : {"numba", "numpy"}
+        The pass over the samples compiled (:func:`fusionbench.coarse_kernel.body_pass`, default) or in NumPy, a
+        Python step per sample (the reference: the same results to rounding, ten to a hundred times slower).
     """
 
     positive_options = ("history_points", "fit_points")
@@ -283,7 +288,8 @@ class InertialCoarseAligner(AlignerBase):
 
     def __init__(self, history_points: int = 100, fit_points: int = 50, motion_mps: float | None = 0.15,
                  motion_mps_per_s2: float = 6e-6, max_gravity_excess: float = 3e-3, caller: str | None = None,
-                 imu=None, level_window_s: float | None = 20.0, level_noise_max: float = 3e-5):
+                 imu=None, level_window_s: float | None = 20.0, level_noise_max: float = 3e-5, engine: str = "numba"):
+        self.engine = check_engine(self.name, engine)
         self.spec = None if imu is None else load_spec(imu)
         self.level_window_s = None if not level_window_s else float(level_window_s)
         self.level_noise_max = float(level_noise_max)
@@ -330,15 +336,18 @@ class InertialCoarseAligner(AlignerBase):
         V = np.zeros((R, 3))
         C_keep = np.empty((R, keep.size, 3, 3))
         V_keep = np.empty((R, keep.size, 3))
-        j = 0
-        for k in range(N):
-            V = V + (C @ dv_b[:, k, :, None])[..., 0]
-            C = C @ C_b[:, k]
-            if block[k] >= 0:
-                V_blk[:, block[k]] += V
-            if j < keep.size and keep[j] == k:
-                C_keep[:, j], V_keep[:, j] = C, V
-                j += 1
+        if self.engine == "numba":
+            body_pass(np.ascontiguousarray(C_b), np.ascontiguousarray(dv_b), block, keep, V_blk, C_keep, V_keep)
+        else:  # the reference: the same pass in NumPy, a Python step per sample
+            j = 0
+            for k in range(N):
+                V = V + (C @ dv_b[:, k, :, None])[..., 0]
+                C = C @ C_b[:, k]
+                if block[k] >= 0:
+                    V_blk[:, block[k]] += V
+                if j < keep.size and keep[j] == k:
+                    C_keep[:, j], V_keep[:, j] = C, V
+                    j += 1
         tk = t[keep] - imu.t0
         fit = np.unique(np.linspace(keep.size // 2, keep.size - 1, self.fit_points).round().astype(int))
         if vref is None:
