@@ -10,11 +10,39 @@ import sys as _sys
 __version__ = "0.1.0"
 
 
+#: The packages whose numba kernels are cached (they call each other's compiled functions).
+COMPILED_PACKAGES = ("fusionbench", "adrc", "baselines", "damping")
+
+
+def compiled_sources_key(root=None):
+    """A digest (12 hex digits) of the source of every module of :data:`COMPILED_PACKAGES` under ``root`` (default:
+    where this package is installed) that uses numba.
+
+    numba invalidates a cached kernel when its own file changes, not when a compiled function it calls from another
+    file does (the strapdown kernel inside the compass loops, say): a kernel cached before such an edit would run
+    the old code. The cache folder is therefore named by this digest, so any change to compiled code, or a new
+    version, starts a fresh cache."""
+    import hashlib
+
+    root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__))) if root is None else str(root)
+    digest = hashlib.sha256()
+    for pkg in COMPILED_PACKAGES:
+        for folder, dirs, files in sorted(_os.walk(_os.path.join(root, pkg))):
+            dirs.sort()
+            for name in sorted(f for f in files if f.endswith(".py")):
+                with open(_os.path.join(folder, name), "rb") as fh:
+                    text = fh.read()
+                if b"numba" in text:
+                    digest.update(_os.path.relpath(_os.path.join(folder, name), root).encode() + b"\0" + text)
+    return digest.hexdigest()[:12]
+
+
 def numba_cache_dir():
     """Where numba keeps its compiled kernels (``cache=True``): ``$NUMBA_CACHE_DIR`` if set, else the per-user
-    ``$XDG_CACHE_HOME/fusionbench/numba`` (``~/.cache/fusionbench/numba``)."""
+    ``$XDG_CACHE_HOME/fusionbench/numba/<key>`` (``~/.cache/fusionbench/numba/<key>``), ``<key>`` the digest of the
+    compiled sources (:func:`compiled_sources_key`)."""
     base = _os.environ.get("XDG_CACHE_HOME") or _os.path.join(_os.path.expanduser("~"), ".cache")
-    return _os.environ.get("NUMBA_CACHE_DIR") or _os.path.join(base, "fusionbench", "numba")
+    return _os.environ.get("NUMBA_CACHE_DIR") or _os.path.join(base, "fusionbench", "numba", compiled_sources_key())
 
 
 # numba's on-disk cache goes to a per-user directory, not beside the installed modules: cache files left in

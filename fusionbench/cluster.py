@@ -43,6 +43,26 @@ def _distributed():
     return distributed
 
 
+def _probe(scheduler, timeout_s):
+    """One TCP connection to a ``tcp://host:port`` address: a refusal (nothing listens there) is reported at once,
+    where distributed's client would retry until its timeout. Other schemes are left to distributed."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(scheduler)
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:  # a port that is not a number: distributed names it
+        return
+    if parts.scheme != "tcp" or host is None or port is None:
+        return
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ValueError(f"--scheduler {scheduler}: no Dask scheduler answered ({type(exc).__name__}: "
+                         f"{exc.strerror or exc})") from None
+
+
 @contextlib.contextmanager
 def connect(scheduler=None, cluster=None, timeout_s=10.0):
     """Within the block, joblib sends work to a Dask cluster; yields the number of worker threads (the runners'
@@ -68,6 +88,7 @@ def connect(scheduler=None, cluster=None, timeout_s=10.0):
     distributed = _distributed()
     with contextlib.ExitStack() as stack:
         if scheduler is not None:
+            _probe(scheduler, timeout_s)
             try:
                 client = stack.enter_context(distributed.Client(scheduler, timeout=f"{timeout_s}s"))
             except (OSError, TimeoutError, ValueError) as exc:
