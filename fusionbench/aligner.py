@@ -287,7 +287,12 @@ class Aligner(Protocol):
     80 deg), for methods that use an IMU noise model, an
     ``imu`` constructor option (:func:`uses_noise_model`), and for the report: ``events(init_given)`` (its own
     stages, e.g. a coarse hand-over, as ``[(t_s, label)]`` or ``[(t0_s, t1_s, label)]``: :mod:`fusionbench.figures`),
-    ``series_labels`` (axis labels with units of the result's ``series``) and ``report_figures(folder)``.
+    ``series_labels`` (axis labels with units of the result's ``series``) and ``report_figures(folder)``. For the
+    runner's speed and memory: ``align_chunks(chunks, site, record, init=None)`` (and ``_align_chunks``; see
+    :meth:`fusionbench.aligner_base.AlignerBase.align_chunks`), a method that works through a long record in
+    consecutive chunks, which the runner then streams to it (:mod:`fusionbench.streaming`); ``estimate_only()``, a
+    cheaper copy giving the same attitudes without the uncertainty figures, which a smoother's settling on record
+    prefixes uses (:func:`fusionbench.runner._prefix_settling`).
     """
 
     name: str
