@@ -33,7 +33,7 @@ ARCMIN = units.ARCMIN
 def _constant_biases(spec, runs, seed):
     """Each run's constant gyro and accelerometer biases (body, SI): the fixed part plus its per-run draw,
     as the simulator draws them."""
-    from fusionbench.imu import _RunState
+    from fusionbench.imusim import _RunState
 
     states = [_RunState(spec, seed, r) for r in range(runs)]
     return (np.array([st.sensors["gyro"]["bias"] for st in states]),
