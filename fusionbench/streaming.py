@@ -24,7 +24,7 @@ STREAM_MIN_S = 2 * 3600.0
 #: Most runs in one batch of a streamed record: the batch's histories are held whole (``damped-nav`` over 20 h keeps
 #: an attitude a second, about 10 MB a run with its errors against truth), so memory is bounded by this batch,
 #: not by the number of runs.
-STREAM_BATCH_RUNS = 8
+STREAM_BATCH_RUNS = 4
 
 
 def takes_chunks(method) -> bool:
