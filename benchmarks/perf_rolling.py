@@ -9,7 +9,8 @@ coefficients of run r are row r of ``default_rng(2).normal(0, 0.3, (runs, 42)) *
 are phi, theta, psi = 2, 3, 5 deg for every run. The simulator's noise seed is 0 (run r draws the r-th
 child stream of ``SeedSequence(0)``, whatever the batch size). The EKF is
 ``baselines.rolling.ekf.RollingEKF()`` with its defaults (zero coefficients, attitude levelled from the
-first second of outputs, azimuth 0; two passes).
+first second of outputs, azimuth 0; two passes), with the update engine of ``--engine`` (default
+``numpy``, the filter's own default; ``filterpy``, the reference).
 
 Measured, side by side in one invocation:
 
@@ -47,7 +48,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from baselines.rolling import model
-from baselines.rolling.ekf import RollingEKF
+from baselines.rolling.ekf import ENGINES, RollingEKF
 from baselines.rolling.priors import prior_sigma
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, Segment
 from baselines.rolling.simulator import simulate
@@ -73,10 +74,10 @@ def true_coeffs(runs):
     return rng.normal(0.0, 0.3, (runs, model.N_COEFFS)) * prior_sigma()[:model.N_COEFFS]
 
 
-def ekf_run(t, y, w_cmd):
+def ekf_run(t, y, w_cmd, engine="numpy"):
     """The EKF on one run; returns (x history, sigma history, wall s)."""
     t0 = time.perf_counter()
-    res = RollingEKF().calibrate(t, y, w_cmd, LAT)
+    res = RollingEKF(engine=engine).calibrate(t, y, w_cmd, LAT)
     return res.x, res.sigma, time.perf_counter() - t0
 
 
@@ -88,6 +89,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--runs", type=int, default=None, help="N of benchmarks 3 and 4 (default 4, --quick 2)")
+    ap.add_argument("--engine", choices=ENGINES, default="numpy", help="the EKF's update engine (default numpy)")
     args = ap.parse_args()
     scheme = quick_scheme() if args.quick else PAPER_SCHEME
     runs = args.runs or (2 if args.quick else 4)
@@ -98,14 +100,14 @@ def main():
     C0 = model.angles_to_dcm(ANGLES0)
     print(f"seed-002 rolling self-calibration at 34 N: {scheme.duration:g} s scheme "
           f"({', '.join(f'{s.duration:g}' for s in scheme.segments)} s segments), {scheme.n_samples:,} samples "
-          f"at {scheme.sample_s * 1e3:g} ms, {scheme.n_outputs:,} filter steps; N = {runs} runs, {cores} cores")
+          f"at {scheme.sample_s * 1e3:g} ms, {scheme.n_outputs:,} filter steps; N = {runs} runs, {cores} cores; EKF engine {args.engine}")
 
     # warm-up: both numba kernels (serial for runs=1, parallel for runs>1) compiled or loaded from cache
     t0 = time.perf_counter()
     warm = Scheme(((Segment((0.0, -1.0, 0.0), 0.1 * units.DEG, 2.0)),))
     simulate(warm, coeffs[0], C0, LAT, seed=NOISE_SEED, runs=1)
     simulate(warm, coeffs[:2] if runs > 1 else np.stack([coeffs[0]] * 2), C0, LAT, seed=NOISE_SEED, runs=2)
-    RollingEKF().calibrate(np.arange(1, 11) * scheme.filter_s, np.tile([0.0, 9.8, 0.0], (10, 1)), np.zeros((10, 3)), LAT)
+    RollingEKF(engine=args.engine).calibrate(np.arange(1, 11) * scheme.filter_s, np.tile([0.0, 9.8, 0.0], (10, 1)), np.zeros((10, 3)), LAT)
     warm_s = time.perf_counter() - t0
 
     # 1. one run simulated
@@ -114,10 +116,10 @@ def main():
     sim_one = time.perf_counter() - t0
 
     # 2. the EKF on that run (two passes, the default), and its causal first pass alone
-    x0, s0, ekf_one = ekf_run(one.t, one.y[0], one.w_cmd[0])
+    x0, s0, ekf_one = ekf_run(one.t, one.y[0], one.w_cmd[0], args.engine)
     per_step_ms = 1e3 * ekf_one / one.t.size / 2
     t0 = time.perf_counter()
-    RollingEKF(passes=1).calibrate(one.t, one.y[0], one.w_cmd[0], LAT)
+    RollingEKF(passes=1, engine=args.engine).calibrate(one.t, one.y[0], one.w_cmd[0], LAT)
     ekf_first = time.perf_counter() - t0
 
     # 3. N runs simulated: batched in one call against looped one by one
@@ -136,10 +138,10 @@ def main():
 
     # 4. the EKF on the N runs: serial against joblib over all cores, one run per task
     t0 = time.perf_counter()
-    serial = [ekf_run(batch.t, batch.y[k], batch.w_cmd[k]) for k in range(runs)]
+    serial = [ekf_run(batch.t, batch.y[k], batch.w_cmd[k], args.engine) for k in range(runs)]
     ekf_serial = time.perf_counter() - t0
     t0 = time.perf_counter()
-    par = Parallel(n_jobs=-1)(delayed(ekf_run)(batch.t, batch.y[k], batch.w_cmd[k]) for k in range(runs))
+    par = Parallel(n_jobs=-1)(delayed(ekf_run)(batch.t, batch.y[k], batch.w_cmd[k], args.engine) for k in range(runs))
     ekf_parallel = time.perf_counter() - t0
     ekf_same = all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) for a, b in zip(serial, par))
     ekf_maxdiff = max(float(np.max(np.abs(a[0] - b[0]) / b[1])) for a, b in zip(serial, par))  # in sigmas
@@ -185,7 +187,7 @@ def main():
                                                    for n, e, s in zip(("phi", "theta", "psi"), a_err, a_sig)))
 
     out = {
-        "quick": args.quick, "runs": runs, "cores": cores, "scheme_s": scheme.duration,
+        "quick": args.quick, "engine": args.engine, "runs": runs, "cores": cores, "scheme_s": scheme.duration,
         "filter_steps": int(scheme.n_outputs), "warmup_s": round(warm_s, 2),
         "sim_one_run_s": round(sim_one, 3), "ekf_one_run_s": round(ekf_one, 3), "one_run_total_s": round(total, 3),
         "ekf_ms_per_step": round(per_step_ms, 4), "ekf_first_pass_s": round(ekf_first, 3), "target_one_run_s": TARGET_S, "target_met": bool(total < TARGET_S),
