@@ -100,14 +100,16 @@ def main():
     C0 = model.angles_to_dcm(ANGLES0)
     print(f"seed-002 rolling self-calibration at 34 N: {scheme.duration:g} s scheme "
           f"({', '.join(f'{s.duration:g}' for s in scheme.segments)} s segments), {scheme.n_samples:,} samples "
-          f"at {scheme.sample_s * 1e3:g} ms, {scheme.n_outputs:,} filter steps; N = {runs} runs, {cores} cores; EKF engine {args.engine}")
+          f"at {scheme.sample_s * 1e3:g} ms, {scheme.n_outputs:,} filter steps; N = {runs} runs, {cores} cores; "
+          f"EKF engine {args.engine}")
 
     # warm-up: both numba kernels (serial for runs=1, parallel for runs>1) compiled or loaded from cache
     t0 = time.perf_counter()
     warm = Scheme(((Segment((0.0, -1.0, 0.0), 0.1 * units.DEG, 2.0)),))
     simulate(warm, coeffs[0], C0, LAT, seed=NOISE_SEED, runs=1)
     simulate(warm, coeffs[:2] if runs > 1 else np.stack([coeffs[0]] * 2), C0, LAT, seed=NOISE_SEED, runs=2)
-    RollingEKF(engine=args.engine).calibrate(np.arange(1, 11) * scheme.filter_s, np.tile([0.0, 9.8, 0.0], (10, 1)), np.zeros((10, 3)), LAT)
+    RollingEKF(engine=args.engine).calibrate(np.arange(1, 11) * scheme.filter_s, np.tile([0.0, 9.8, 0.0], (10, 1)),
+                                             np.zeros((10, 3)), LAT)
     warm_s = time.perf_counter() - t0
 
     # 1. one run simulated

@@ -1,6 +1,6 @@
 """Seed 002's 45-state EKF: analytic Jacobians against central differences, and a filter that starts on
 the truth of a noise-free run stays on it, two passes recover a noise-free paper run within 1 %, and the
-compiled kernels equal the NumPy platform model; the numpy update engine equals filterpy's."""
+compiled kernels (sigmas included) equal the NumPy model; the numpy update engine equals filterpy's."""
 
 import numpy as np
 import pytest
@@ -157,6 +157,22 @@ def test_compiled_kernels_match_the_platform_model():
         assert np.abs(out[model.ANGLES] - x[model.ANGLES]).max() < 0.1  # continuous: no jump of 2 pi (at theta 80 deg
         # the angles move up to 1 / cos(theta) times the 2e-3 rad turn)
         assert np.array_equal(out[:model.N_COEFFS], x[:model.N_COEFFS] + e[:model.N_COEFFS])
+
+
+def test_compiled_sigmas_match_numpy():
+    """kernels.state_sigmas (the filter's per-step sigmas) against the NumPy formula: the coefficients'
+    sqrt(P_ii) D_i, the angles' sqrt(diag(J P_aa J^T)) with J = -E C^T diag(D_a)."""
+    D = prior_sigma()
+    rng = np.random.default_rng(6)
+    for seed, ang in ((4, (20.0, -35.0, 150.0)), (5, (-170.0, 80.0, -10.0))):
+        x = _state(seed, ang)
+        M = rng.standard_normal((model.N_STATES, model.N_STATES))
+        P = M @ M.T / model.N_STATES + 0.1 * np.eye(model.N_STATES)
+        a = x[model.ANGLES]
+        J = -jacobians.rate_inverse(a) @ model.angles_to_dcm(a).T * D[None, model.ANGLES]
+        ref = np.sqrt(np.diag(P)) * D
+        ref[model.ANGLES] = np.sqrt(np.diag(J @ P[model.ANGLES, model.ANGLES] @ J.T))
+        np.testing.assert_allclose(K.state_sigmas(x, P, D), ref, rtol=1e-13, atol=0)
 
 
 def test_second_pass_reaches_the_information_bound():

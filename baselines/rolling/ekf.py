@@ -21,21 +21,22 @@ with E the inverse of the Euler-rate matrix B (``w = B [phi', theta', psi']``)::
 Jacobians: analytic, in :mod:`baselines.rolling.jacobians` (tests compare them with central finite
 differences).
 
-Filter (Joseph-form EKF update, filterpy's :class:`~filterpy.kalman.ExtendedKalmanFilter` equations) on the states
-scaled by their prior standard deviations (``x = D z``; the raw states span 1e-12 rad/s to 0.1 rad,
-too wide for the covariance in float64). The covariance is error-state (next section); the estimate is
+Filter (Joseph-form EKF update, the equations of filterpy's :class:`~filterpy.kalman.ExtendedKalmanFilter`)
+on the states scaled by their prior standard deviations (``x = D z``; the raw states span 1e-12 rad/s to
+0.1 rad, too wide for the covariance in float64). The covariance is error-state (next section); the estimate is
 propagated over each filter step with 4th-order Runge-Kutta of ``f`` (command held), the covariance with
 ``Phi = I + F_e T + (F_e T)^2 / 2``. F_e has only three non-zero rows (the attitude's), so Phi = I + U
 with U three rows too, and ``Phi P Phi^T = P + U P + P U^T + U P U^T`` takes two 3 x 45 x 45 products.
 Process noise only on the attitude, from the gyros' white drift (``q T I``, q the rate noise density,
 rad^2/s); measurement noise the accelerometers' white noise. The model evaluations of the inner loop
-(RK4, F_e, H_e, h, the error injection) are compiled (:mod:`baselines.rolling.kernels`). The update
-(``engine``): ``"numpy"`` (default) does filterpy's arithmetic directly on the arrays (:func:`joseph_update`:
+(RK4, F_e, H_e, h, the error injection, the sigmas) are compiled (:mod:`baselines.rolling.kernels`). The
+update (``engine``): ``"numpy"`` (default) does filterpy's arithmetic directly on the arrays (:func:`joseph_update`:
 ``S = H P H^T + R``, ``K = P H^T inv(S)``, ``P = (I - K H) P (I - K H)^T + K R K^T``, in filterpy's
 operation order and with its LAPACK inverse), without its per-call overhead (attribute juggling, copies of
 the prior and posterior); ``"filterpy"`` calls :meth:`ExtendedKalmanFilter.update`, the reference (the two
-agree to rounding: tests/test_rolling_ekf.py). One step takes about 0.2 ms, one pass over the paper's
-27 000 outputs about 5 s.
+agree to rounding: tests/test_rolling_ekf.py). One step takes about 0.15 ms with numpy, 0.175 ms with
+filterpy (``benchmarks/perf_rolling.py --quick --engine``, 2 cores, load 3), one pass over the paper's
+27 000 outputs about 4 s.
 
 Error-state covariance. The estimate keeps the Euler angles, but the covariance is that of the error
 ``e = [c_true - c_est (42), eta (3)]`` with ``C_true = (I - [eta x]) C_est`` (eta a small rotation in n)::
@@ -81,7 +82,6 @@ from fusionbench import earth
 
 from . import kernels as K
 from . import model
-from .jacobians import rate_inverse
 from .observability import information_rank, informed_directions, sensitivity_curves, sensitivity_figure
 from .priors import ANGLE_SIGMA_DEG, prior_sigma
 from .protocol import CalibrationResult
@@ -281,7 +281,7 @@ class RollingEKF:
             xs[k] = K.inject(x, e[:, 0] * D)
             if not nominal:
                 x = xs[k]
-            sig[k] = _sigmas(xs[k], P, D)
+            sig[k] = K.state_sigmas(xs[k], P, D)
         figures = {"information_rank": information_rank(info), "informed_directions": informed_directions(info)}
         return CalibrationResult(t, xs, sig, figures, info, scale=D)
 
@@ -306,15 +306,6 @@ def joseph_update(x, P, H, R, z, eye):
         x = x + Kg @ (z - H @ x)
     I_KH = eye - Kg @ H
     return x, (I_KH @ P) @ I_KH.T + (Kg @ R) @ Kg.T
-
-
-def _sigmas(x, P, D):
-    """Standard deviations of the 45 states from the scaled error covariance; the angles' through
-    ``d angles = -E C^T eta`` (a rotation eta in n seen by the Euler angles)."""
-    sig = np.sqrt(np.diag(P)) * D
-    J = -rate_inverse(x[model.ANGLES]) @ K.dcm(x[model.ANGLES]).T * D[None, model.ANGLES]
-    sig[model.ANGLES] = np.sqrt(np.diag(J @ P[model.ANGLES, model.ANGLES] @ J.T))
-    return sig
 
 
 def backward(x_end, w_cmd, dt, lat, h=0.0):

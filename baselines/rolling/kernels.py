@@ -1,8 +1,8 @@
 """Compiled (numba) model evaluations for the inner loop of :mod:`baselines.rolling.ekf`.
 
 One filter step evaluates the state derivative four times (RK4), the error-state Jacobians, the
-measurement and the error injection on a single 45-vector. In NumPy each of these costs tens of small
-array operations (about 0.9 ms a step in all); compiled, a few microseconds. The equations are those of
+measurement, the error injection and the 45 sigmas on a single 45-vector. In NumPy each of these costs
+tens of small array operations (about 0.9 ms a step in all); compiled, a few microseconds. The equations are those of
 :mod:`baselines.rolling.ekf` (module notes) and :mod:`baselines.rolling`; the element formulas of the
 attitude matrix, the angle rates, the drifts and the accelerometer outputs are the platform model's own
 plain-arithmetic functions, compiled here, so there is one copy of each.
@@ -193,3 +193,29 @@ def inject(x, e):
     for i in range(3):
         out[42 + i] = x[42 + i] + (a[i] - x[42 + i] + np.pi) % (2.0 * np.pi) - np.pi
     return out
+
+
+@numba.njit(cache=True)
+def state_sigmas(x, P, D):
+    """Standard deviations of the 45 states at the estimate ``x`` from the error covariance ``P`` (45 x 45)
+    scaled by ``D`` (45,) (``e = D z``): the coefficients' ``sqrt(P_ii) D_i``, the angles' through
+    ``d angles = -E C^T eta`` (a rotation eta in n seen by the Euler angles; E the inverse of the Euler-rate
+    matrix, its columns the angle rates of unit ``w``)."""
+    sig = np.empty(45)
+    for i in range(42):
+        sig[i] = np.sqrt(P[i, i]) * D[i]
+    a = x[42:45]
+    st, ct, ss, cs = np.sin(a[1]), np.cos(a[1]), np.sin(a[2]), np.cos(a[2])
+    E = np.empty((3, 3))
+    for j in range(3):
+        E[0, j], E[1, j], E[2, j] = _rates_t(st, ct, ss, cs, 1.0 * (j == 0), 1.0 * (j == 1), 1.0 * (j == 2))
+    J = -(E @ dcm(a).T)
+    for j in range(3):
+        J[:, j] *= D[42 + j]
+    for i in range(3):
+        s = 0.0
+        for j in range(3):
+            for k in range(3):
+                s += J[i, j] * P[42 + j, 42 + k] * J[i, k]
+        sig[42 + i] = np.sqrt(s)
+    return sig
