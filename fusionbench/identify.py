@@ -19,7 +19,6 @@ line).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,10 +29,9 @@ from . import allan as allan_mod
 from . import allanfit, units
 from .imu import SPEC_SCALARS, IMUSpec, spec_from_table
 from .imudata import IMUData
-from .imufiles import atomic_open
 
 __all__ = ["MIN_SAMPLES", "MIN_TAU_S", "UNITS", "ADEV_UNITS", "Term", "Identification", "identify", "summary",
-           "spec_table", "write_spec_toml", "write_identify_report", "run_identify"]
+           "spec_table", "write_spec_toml", "write_identify_report", "run_identify", "poor_fit_note", "report_dict"]
 
 #: Fewest samples a record must have.
 MIN_SAMPLES = 100
@@ -290,195 +288,6 @@ def _point_p(ratio, edf):
     return np.minimum(1.0, 2.0 * np.minimum(chi2_dist.cdf(x, edf), chi2_dist.sf(x, edf)))
 
 
-def poor_fit_note(ident: Identification):
-    """One line naming the axes whose Allan curve the standard terms do not describe, or ""."""
-    bad = ident.poor_fits()
-    if not bad:
-        return ""
-    axes = ", ".join(f"{s} {ax} ({r:.3g} x the model at {t:.3g} s)" for s, ax, t, r, _ in bad)
-    return (f"warning: the IEEE-952 terms do not describe {axes}: a point that far off has a probability below "
-            f"{FIT_P_MIN:g}; "
-            f"correlated (Gauss-Markov) noise, a vibration, a motion or a temperature drift in the record? (see "
-            f"allan.png) Those axes' terms, and the spec's, are only an approximation of the sensor's noise")
-
-
-def _vec(values):
-    return "[" + ", ".join(_fmt(v) for v in values) + "]"
-
-
-def spec_table(ident: Identification):
-    """The ``[imu]`` table of the identified spec: a list of ``(key, value, comment)``, values in the keys' units
-    (full precision), only the keys of what was identified (plus the preset, name, description and the
-    placeholder bias sigmas)."""
-    x_peak, adev_peak = allanfit.gm_peak()
-    where = f" from {ident.source}" if ident.source else ""
-    rows = [("preset", "ideal", "no errors but those below: scale factors, misalignment and the fixed bias cannot "
-                                "be seen in a static record"),
-            ("name", ident.name, ""),
-            ("description", f"identified{where} by fusionbench identify: {ident.samples} samples of {ident.dt:.6g} s "
-                            f"({ident.duration / 3600:.3g} h), Allan deviation and IEEE-952 fit", "")]
-    for s in SENSORS:
-        keys, terms = _KEYS[s], {t: [ident.term(s, j, t) for j in range(3)] for t in allanfit.TERMS}
-        for t in ("N", "K"):
-            if any(x.present for x in terms[t]):
-                factor = UNITS[s][t][2]
-                rows.append((keys[t], [x.value / factor for x in terms[t]],
-                             f"{t}, Allan slope {_slope(t)}: +- {_vec(x.datasheet_sigma for x in terms[t])} "
-                             f"{UNITS[s][t][1]} (1 sigma); 0 = not significant"))
-        sig, T, floor = ident.gauss_markov(s)
-        if T is not None:
-            factor = UNITS[s]["B"][2]
-            rows.append((keys["instability"], [v / factor for v in sig],
-                         f"Gauss-Markov sigma for B = {_vec(x.datasheet for x in terms['B'])} {UNITS[s]['B'][1]}: "
-                         f"0.664 B / {adev_peak:.4f}, its Allan peak at the flicker floor"))
-            rows.append((keys["tau"], T, f"s: the fitted curve's minimum at {floor:.4g} s (geometric mean over the "
-                                         f"axes) / {x_peak:.4f}, where a Gauss-Markov's Allan deviation peaks"))
-        q = ident.quantum(s)
-        if q > 0:
-            factor = UNITS[s]["Q"][2]
-            rows.append((keys["quantum"], q / factor,
-                         f"{UNITS[s]['Q'][1]} per count = sqrt(12) Q, Q = {_vec(x.datasheet for x in terms['Q'])} "
-                         f"{UNITS[s]['Q'][1]} (mean of the axes that show it)"))
-        bias, measured = ident.bias_bound(s)
-        factor = UNITS[s]["B"][2]
-        rows.append((keys["bias_sigma"], [v / factor for v in bias],
-                     "PLACEHOLDER, replace with the datasheet's bias repeatability: a static record cannot show the "
-                     "turn-on bias; this is B" + ("" if measured.all() else
-                                                  " (the largest B the record allows where B is not seen)")))
-    return rows
-
-
-def _slope(t):
-    return {"Q": "-1", "N": "-1/2", "B": "0", "K": "+1/2", "R": "+1"}[t]
-
-
-def write_spec_toml(ident: Identification, path):
-    """Write the identified spec as an IMU spec TOML (an ``[imu]`` table, :func:`fusionbench.imu.load_spec` reads
-    it), atomically, each number commented with where it comes from. Returns the path.
-
-    Raises
-    ------
-    ValueError
-        A figure beyond what the ``[imu]`` parser accepts (nothing written).
-    """
-    rows = spec_table(ident)
-    ident.to_spec()  # the parser accepts every figure, or nothing is written
-    lines = ["# IMU spec identified by fusionbench identify from a static record (overlapping Allan deviation and",
-             "# a least-squares fit of the IEEE-952 terms; see docs/identify.md). Values per body axis x, y, z.",
-             f"# record: {ident.source or '(not named)'}, run {ident.run}, {ident.samples} samples of {ident.dt:.6g} s "
-             f"({ident.duration:.6g} s), kind {ident.kind}",
-             "[imu]"]
-    for key, value, comment in rows:
-        text = json.dumps(value) if isinstance(value, str) else (_vec(value) if isinstance(value, list) else _fmt(value))
-        lines.append(f"{key} = {text}" + (f"  # {comment}" if comment else ""))
-    for s, ax, t, r, _ in ident.poor_fits():
-        lines.append(f"# WARNING: {s} {ax}: the IEEE-952 terms do not describe its Allan curve ({r:.3g} x the model "
-                     f"at {t:.3g} s); its figures above only approximate the sensor's noise")
-    for s in SENSORS:
-        ramps = [ident.term(s, j, "R") for j in range(3)]
-        if any(r.present for r in ramps):
-            lines.append(f"# {s} rate ramp R = {_vec(r.datasheet for r in ramps)} {UNITS[s]['R'][1]}: the error model "
-                         f"has no ramp, it is not in this spec")
-    with atomic_open(path) as fh:
-        fh.write("\n".join(lines) + "\n")
-    return Path(path)
-
-
-# ------------------------------------------------------------------------------------------------ the report
-
-
-def _axis_json(f: allanfit.AllanFit, sensor):
-    c = f.curve
-    terms = {}
-    for t in allanfit.TERMS:
-        si, ds, factor = UNITS[sensor][t]
-        present = f.is_present(t)
-        terms[t] = {"present": present, "adev_slope": allanfit.SLOPES[t],
-                    "si": f.value(t) if present else None, "si_sigma": f.sigma(t) if present else None, "si_unit": si,
-                    "datasheet": f.value(t) / factor if present else None,
-                    "datasheet_sigma": f.sigma(t) / factor if present else None, "datasheet_unit": ds}
-    return {"tau_s": c.tau.tolist(), "adev": c.adev.tolist(), "adev_lo": c.lo.tolist(), "adev_hi": c.hi.tolist(),
-            "edf": c.edf.tolist(), "noise_alpha": c.alpha.tolist(), "adev_unit": ADEV_SI[sensor],
-            "tau_floor_s": f.tau_floor, "chi2": f.chi2, "dof": f.dof,
-            "worst_point_p": float(_point_p(c.adev ** 2 / f.avar(c.tau), c.edf).min()), "terms": terms}
-
-
-def report_dict(ident: Identification):
-    """Everything of the identification as a JSON-able dict (SI and datasheet units, uncertainties 1 sigma)."""
-    x_peak, adev_peak = allanfit.gm_peak()
-    out = {"name": ident.name, "source": ident.source,
-           "record": {"samples": ident.samples, "dt_s": ident.dt, "duration_s": ident.duration, "kind": ident.kind,
-                      "run": ident.run, "mean_rate_dph": ident.mean_rate / units.DEG_PER_H,
-                      "mean_specific_force_mps2": ident.mean_specific_force, "static_note": ident.static_note()},
-           "method": {"allan": "overlapping Allan deviation (allantools.oadev) of the cumulative increments at octave "
-                               "taus up to a quarter of the record; 1-sigma chi-square intervals with Greenhall's "
-                               "equivalent degrees of freedom",
-                      "model": "sigma^2(tau) = 3 Q^2/tau^2 + N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 + R^2 tau^2/2",
-                      "fit": "generalised least squares of the Allan variance, non-negative, with the estimates' "
-                             "covariance (edf, octave correlations) from the model; terms: the subset minimising the log-space deviance + "
-                             f"{allanfit.SIGNIFICANCE:g}^2 per term",
-                      "uncertainty": "1 sigma from the least-squares covariance, scaled by the reduced chi-square "
-                                     "when above 1",
-                      "significance_sigma": allanfit.SIGNIFICANCE,
-                      "gauss_markov_peak": {"tau_over_T": x_peak, "adev_over_sigma": adev_peak}},
-           "turn_on_bias": "not observable in one static record: the spec's bias sigma is a placeholder (B)",
-           "poor_fit_note": poor_fit_note(ident)}
-    for s in SENSORS:
-        sig, T, floor = ident.gauss_markov(s)
-        out[s] = {"axes": {ax: _axis_json(f, s) for ax, f in zip(AXES, ident.fits(s))},
-                  "gauss_markov": {"sigma_si": sig.tolist(), "sigma_datasheet": (sig / UNITS[s]["B"][2]).tolist(),
-                                   "tau_s": T, "tau_floor_s": floor},
-                  "quantum_si": ident.quantum(s)}
-    out["spec"] = {k: v for k, v, _ in spec_table(ident)}
-    return out
-
-
-def write_identify_report(ident: Identification, out_dir):
-    """Write ``identify.json`` (:func:`report_dict`, no NaN) and the figure ``allan.png`` into ``out_dir`` (created
-    if needed), each atomically. Returns the two paths."""
-    from .allanplot import allan_figure  # matplotlib only when a figure is drawn
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_open(out / JSON_FILE) as fh:
-        json.dump(report_dict(ident), fh, indent=1, allow_nan=False)
-        fh.write("\n")
-    allan_figure(ident, out / FIGURE_FILE)
-    return [out / JSON_FILE, out / FIGURE_FILE]
-
-
-def _pm(value, sigma):
-    """``value +- sigma`` rounded to the uncertainty's second significant digit."""
-    if not (sigma > 0 and np.isfinite(sigma)):
-        return f"{value:.4g}"
-    digits = max(0, 1 - int(math.floor(math.log10(sigma))))
-    if digits > 6 or abs(value) >= 1e6:
-        return f"{value:.3g} +- {sigma:.2g}"
-    return f"{value:.{digits}f} +- {sigma:.{digits}f}"
-
-
-def summary(ident: Identification):
-    """Lines for the command line: the record, one line per sensor axis with the present terms in datasheet units
-    (+- 1 sigma), and what the spec cannot hold."""
-    f0 = ident.gyro[0].curve
-    lines = [f"{ident.name}: {ident.samples} samples of {ident.dt:.6g} s ({ident.duration / 3600:.3g} h, {ident.kind}); "
-             f"Allan deviation at {f0.tau.size} taus {f0.tau[0]:.3g}-{f0.tau[-1]:.4g} s, IEEE-952 terms +- 1 sigma "
-             f"(absent: below {allanfit.SIGNIFICANCE:g} sigma)"]
-    for s in SENSORS:
-        for j, ax in enumerate(AXES):
-            terms = [ident.term(s, j, t) for t in allanfit.TERMS]
-            shown = [f"{t.name} {_pm(t.datasheet, t.datasheet_sigma)} {t.unit}" for t in terms if t.present]
-            absent = [t.name for t in terms if not t.present]
-            lines.append(f"{s:5s} {ax}: " + ("; ".join(shown) or "no term") + (f"  ({', '.join(absent)} absent)"
-                                                                              if absent else ""))
-    lines.append("turn-on bias: not observable in one static record (the mean mixes it with earth rate and gravity); "
-                 "the spec's bias sigmas are placeholders (B): replace them with the datasheet's bias repeatability")
-    if any(ident.term(s, j, "R").present for s in SENSORS for j in range(3)):
-        lines.append("rate ramp: the error model has none; reported, not in the spec")
-    notes = [ident.static_note(), poor_fit_note(ident)]
-    return lines + [n for n in notes if n]
-
-
 def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
     """Identify ``imu`` and write into ``out_dir``: the spec ``imu_spec.toml``, ``identify.json`` and ``allan.png``.
 
@@ -497,3 +306,8 @@ def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
     paths = write_identify_report(ident, out_dir)
     spec = write_spec_toml(ident, Path(out_dir) / SPEC_FILE)
     return summary(ident) + [f"wrote {spec}, {paths[0]}, {paths[1]}"]
+
+
+# what is written and printed of an identification, in its own module; its names are this module's too
+from .identify_report import (poor_fit_note, report_dict, spec_table, summary, write_identify_report,  # noqa: E402
+                              write_spec_toml)
