@@ -95,7 +95,7 @@ import numpy as np
 import scipy.linalg
 
 from fusionbench.aligner import AlignmentResult, Site, Supports, variant
-from fusionbench.aligner_base import AlignerBase
+from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imu import load_spec
 from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
 from fusionbench.strapdown import rodrigues
@@ -282,10 +282,10 @@ class ADRCGyrocompass(AlignerBase):
         """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (eqs. 17-18)."""
         return [(float(self.shot_s), "azimuth shot")]
 
-    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+    def _align(self, imu, site: Site, aiding, init) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
         ``init`` the loop starts levelled with yaw 0."""
-        loop = CommandLoop(imu, site, init, self.step_s, vref)
+        loop = CommandLoop(imu, site, init, self.step_s, per_increment_velocity(aiding, imu, self.name))
         h, R, g = loop.step_s, loop.R, site.g  # h: Han's step, step_s in whole samples
         A, _, _, _ = level_loop_model(self, imu.dt, g)
         rho = float(np.max(np.abs(np.linalg.eigvals(A))))

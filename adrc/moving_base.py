@@ -270,8 +270,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_not_accelerating, coarse_then_fine, variant
-from fusionbench.aligner_base import AlignerBase
+from fusionbench.aligner import AlignmentResult, Site, Supports, check_not_accelerating, variant
+from fusionbench.aligner_base import AlignerBase, coarse_then_fine, per_increment_velocity
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 from fusionbench.coarse import InertialCoarseAligner
@@ -674,6 +674,7 @@ class ESOTDAligner(AlignerBase):
     positive_options = ("step_s", "td_r", "force_h1", "feedback_every_s")
 
     name = "eso-td"
+    uses_aiding = True
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.7 arcmin from the limit (conformance)
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05)
     max_latitude_deg = MAX_LATITUDE_DEG  # eq. 12 divides by the horizontal earth rate
@@ -761,7 +762,7 @@ class ESOTDAligner(AlignerBase):
         alignment at ``coarse_s`` (s), when no initial attitude is given."""
         return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
 
-    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+    def _align(self, imu, site: Site, aiding, init) -> AlignmentResult:
         """Align R recordings on a moving base with a velocity reference, or on a static or swaying base
         without one; see the module docstring.
 
@@ -771,22 +772,23 @@ class ESOTDAligner(AlignerBase):
             Body RFU increments or rates.
         site : Site
             Position at the initial state.
-        vref : ndarray, shape (R, M, 3), optional
-            Reference velocity (ENU, m/s) at each increment end; zero (a stationary or swaying base) if
-            None, in which case a base that accelerates is refused (ValueError naming the figure).
+        aiding : fusionbench.aiding.Aiding, optional
+            Velocity or position rows (ENU, m/s; lat, lon, h) of a moving base; None: a stationary or swaying base
+            (zero velocity).
         init : ndarray, shape (R, 3, 3) or (3, 3), optional
             Initial attitude C_bn within a few degrees (the small-angle model; seed 001 starts from
             20', 20', 40'). None: an inertial-frame coarse alignment over the first ``coarse_s`` seconds
-            first (with the reference when there is one; without, it refuses a moving base).
+            first (with the aiding when there is one).
         """
         t, dth, dvel = imu.increments()
         R = imu.runs
-        if init is None:  # any heading: inertial-frame coarse alignment first (with the reference, if any)
+        if init is None:  # any heading: inertial-frame coarse alignment first (with the aiding, if any)
             coarse = InertialCoarseAligner(history_points=20, max_gravity_excess=self.max_gravity_excess,
                                            caller=self.name)
             # the fine stage through align: the input policy again, on the rest of the record
-            return coarse_then_fine(imu, site, vref, coarse, self.coarse_s,
-                                    lambda rest, vr, C0, v0: self.align(rest, site, vr, C0))
+            return coarse_then_fine(imu, site, aiding, coarse, self.coarse_s,
+                                    lambda rest, aid, C0, t_hand: self.align(rest, site, init=C0, aiding=aid))
+        vref = per_increment_velocity(aiding, imu, self.name)
         if vref is None:
             self._check_not_accelerating(dvel, imu.dt, site)
             vref = np.zeros((R, t.size, 3))

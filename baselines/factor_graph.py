@@ -184,7 +184,7 @@ from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth, units
 from fusionbench.aligner import AlignmentResult, Site, Supports
-from fusionbench.aligner_base import AlignerBase
+from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.attitude import dcm_to_rotvec, orthonormalize
 from fusionbench.imu import IMUSpec, load_spec
 from fusionbench.imudata import IMUData
@@ -328,6 +328,7 @@ class FactorGraphAligner(AlignerBase):
     positive_options = ("step_s", "position_sigma", "integration_sigma", "max_iterations", "max_passes", "huber_k")
 
     name = "gtsam"
+    uses_aiding = True
     description = ("factor-graph fine alignment (gtsam ImuFactors, earth-rate Coriolis, every reference sample against "
                    "the IMU's velocity at its time, bias priors from the IMU model)")
     robust = False
@@ -624,7 +625,7 @@ class FactorGraphAligner(AlignerBase):
         return sol, {}
 
     # ------------------------------------------------------------------------------------- align
-    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
+    def _align(self, imu: IMUData, site: Site, aiding, init) -> AlignmentResult:
         """Align every recording of ``imu`` by factor-graph smoothing, from any heading.
 
         Parameters
@@ -662,6 +663,7 @@ class FactorGraphAligner(AlignerBase):
             beyond 89 deg, a record shorter than ``min_duration_s``, badly shaped ``vref`` or ``init``,
             non-finite samples), a keyframe interval shorter than the sample interval.
         """
+        vref = per_increment_velocity(aiding, imu, self.name)
         if self.step_s < imu.dt:
             raise ValueError(f"{self.name}: step_s: expected a keyframe interval of at least the sample interval "
                              f"{imu.dt:g} s, found {self.step_s:g} s")
@@ -673,7 +675,7 @@ class FactorGraphAligner(AlignerBase):
         t_kf = np.concatenate([[imu.t0], t_end[counts[1:] - 1]])
         T = np.diff(counts) * dt
         seg, walk = self._bias_segments(t_kf)
-        coarse_final = None if init is not None else self.coarse.align(imu, site, vref=vref).C_bn_final
+        coarse_final = None if init is not None else self.coarse.align(imu, site, aiding=aiding).C_bn_final
 
         C_out = np.empty((R, K, 3, 3))
         sig, sig_noise = np.full((R, K, 3), np.nan), np.full((R, K, 3), np.nan)
@@ -695,7 +697,7 @@ class FactorGraphAligner(AlignerBase):
                 # LM stopped at its iteration limit from the given guess: start again from the coarse
                 # alignment and keep the better solution
                 if coarse_final is None:
-                    coarse_final = self.coarse.align(imu, site, vref=vref).C_bn_final
+                    coarse_final = self.coarse.align(imu, site, aiding=aiding).C_bn_final
                 other = self._solve(problem, _propagate(orthonormalize(coarse_final[r]), dR, problem["w_in"], T,
                                                         forward=False))
                 restarted[r] = True

@@ -46,7 +46,7 @@ import numpy as np
 
 from fusionbench import earth
 from fusionbench.aligner import AlignmentResult, Site, Supports
-from fusionbench.aligner_base import AlignerBase
+from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imu import load_spec
 from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
 
@@ -207,10 +207,10 @@ class PIDGyrocompass(AlignerBase):
         fitted azimuth) and the closing of the compass loop."""
         return [(float(self.shot_s), "azimuth shot"), (self.compass_stages[0][0], "compass loop closed")]
 
-    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
+    def _align(self, imu, site: Site, aiding, init) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
         ``init`` the loop starts levelled with yaw 0."""
-        loop = CommandLoop(imu, site, init, self.step_s, vref)
+        loop = CommandLoop(imu, site, init, self.step_s, per_increment_velocity(aiding, imu, self.name))
         h, R, g = loop.step_s, loop.R, site.g  # h: the step of the loops' Euler integration
         rm, rn = earth.radii(site.lat)
         radius = np.sqrt(rm * rn) + site.h

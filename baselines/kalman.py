@@ -33,8 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, azimuth_bias_ratio, coarse_then_fine
-from fusionbench.aligner_base import AlignerBase
+from fusionbench.aligner import AlignmentResult, Site, Supports, azimuth_bias_ratio
+from fusionbench.aligner_base import AlignerBase, coarse_then_fine, per_increment_velocity
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec
 from fusionbench.strapdown import NavState, Strapdown
@@ -189,6 +189,7 @@ class KalmanAligner(AlignerBase):
     """
 
     name = "kf"
+    uses_aiding = True
     # not moving: on the 0.1 g moving base it ends 1.3-1.7 bounds off with a -1.2 to -1.4 arcmin mean azimuth offset
     # whatever the heading (gtsam 1.0 on the same data); not tactical gyros: 1.5-2.1 bounds off (conformance)
     supports = Supports(bases=("static", "sway"), max_abs_lat_deg=89.0, max_bias_ratio=0.05)
@@ -257,16 +258,19 @@ class KalmanAligner(AlignerBase):
         bank.update(z)
 
     # ---------------------------------------------------------------- alignment
-    def _align(self, imu, site: Site, vref, init) -> AlignmentResult:
-        """Align R recordings (body RFU increments, ENU reference velocity (R, M, 3) or None): from ``init``, or
-        after an inertial-frame coarse alignment over the first ``coarse_s`` seconds."""
+    def _align(self, imu, site: Site, aiding, init) -> AlignmentResult:
+        """Align R recordings (body RFU increments, aiding rows or None): from ``init``, or after an inertial-frame
+        coarse alignment over the first ``coarse_s`` seconds."""
+        vref = per_increment_velocity(aiding, imu, self.name)
         if init is not None:
             return self._fine(imu, site, vref, init, np.zeros((imu.runs, 3)) if vref is None else vref[:, 0], imu.dt)
         coarse = InertialCoarseAligner(history_points=20, caller=self.name)
+        k0 = int(round(self.coarse_s / imu.dt))
         # the fine stage keeps the whole record's sample interval (the rest's own, from its span, differs in the
         # last bits) and starts at the reference velocity at the hand-over
-        return coarse_then_fine(imu, site, vref, coarse, self.coarse_s, lambda rest, vr, C0, v0: self._fine(
-            rest, site, vr, C0, np.zeros((imu.runs, 3)) if v0 is None else v0, imu.dt))
+        return coarse_then_fine(imu, site, aiding, coarse, self.coarse_s, lambda rest, aid, C0, t_hand: self._fine(
+            rest, site, None if vref is None else vref[:, k0:], C0,
+            np.zeros((imu.runs, 3)) if vref is None else vref[:, k0 - 1], imu.dt))
 
     def _fine(self, imu, site, vref, C0, v0, dt) -> AlignmentResult:
         """The filter around the feedback-corrected strapdown from attitude ``C0`` (R, 3, 3) and velocity ``v0``

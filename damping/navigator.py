@@ -51,7 +51,7 @@ import numpy as np
 
 from fusionbench import earth
 from fusionbench.aligner import AlignmentResult, Supports
-from fusionbench.aligner_base import AlignerBase
+from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imudata import IMUData
 from fusionbench.inputs import check_init
 from fusionbench.strapdown import NavState, Strapdown, integrate_compiled
@@ -105,6 +105,7 @@ class DampedNavigator(AlignerBase):
     positive_options = ("step_s", "accel_tau_s", "max_error_deg")
 
     name = "damped-nav"
+    uses_aiding = True  # the adaptive scheme may read the ship's velocity (accel_source="vref")
     supports = Supports(bases=(), needs_init=True)  # a navigator: it needs an initial attitude from an alignment
     description = "free-inertial navigation with seed 004's damping network (undamped, fixed xi = 0.5, or adaptive q)"
     min_duration_s = 10.0
@@ -179,13 +180,13 @@ class DampedNavigator(AlignerBase):
             coefficients of the networks on the east and north velocity (1: not engaged),
             ``figures`` the scheme's q_fixed and, for ``adaptive``, the map's held-out MSE ``map_mse``.
         """
-        vref, init = self.check(imu, site, vref, init)
-        return self._navigate(imu, site, init, vref)
+        aiding, init = self.check(imu, site, vref, init)
+        return self._navigate(imu, site, init, per_increment_velocity(aiding, imu, self.name))
 
-    def _align(self, imu: IMUData, site, vref, init) -> AlignmentResult:
+    def _align(self, imu: IMUData, site, aiding, init) -> AlignmentResult:
         """The adapter the runner calls (``align``): after the input policy, which requires ``init``, the
-        navigation of :meth:`navigate`."""
-        return self._navigate(imu, site, init, vref)
+        navigation of :meth:`navigate` (aiding as a velocity at every increment end)."""
+        return self._navigate(imu, site, init, per_increment_velocity(aiding, imu, self.name))
 
     def _navigate(self, imu: IMUData, site, init, vref) -> AlignmentResult:
         """:meth:`navigate` on checked arguments: the record in chunks of an hour (:meth:`navigate_chunks`)."""

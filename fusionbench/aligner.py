@@ -2,13 +2,14 @@
 :mod:`fusionbench.discovery`, re-exported here).
 
 A method is a class with a ``name``, a one-line ``description`` and
-``align(imu, site, vref=None, init=None) -> AlignmentResult``. Methods are found by name in
+``align(imu, site, vref=None, init=None, aiding=None) -> AlignmentResult``. Methods are found by name in
 the entry-point group ``fusionbench.methods`` (the project's own families are registered there
 in pyproject.toml like any plug-in; the core never imports them), or given as a
 ``module:Class`` path, so a user's own aligner runs in ``fusionbench run`` without packaging.
 
-A method never sees truth: it gets the IMU data, the site, an optional velocity reference and
-an optional initial attitude guess.
+A method never sees truth: it gets the IMU data, the site, optional aiding (:class:`fusionbench.aiding.Aiding`:
+velocity and/or position rows at a receiver's epochs, with lever arm and latency; ``vref``, a velocity at every
+increment end, is its older form) and an optional initial attitude guess.
 
 Time rule (every method, every kind of input)
 ---------------------------------------------
@@ -221,8 +222,8 @@ def check_not_accelerating(excess, limit, name: str):
     if abs(excess[r]) > limit:
         raise ValueError(f"{name}: the base accelerates (recording {r}: the specific force differs from gravity by "
                          f"{excess[r] * 1e3:+.1f} mg, on a stationary or swaying base by less than {limit * 1e3:.1f} mg: "
-                         f"about {np.sqrt(2 * abs(excess[r])):.2f} g of horizontal acceleration); a moving base needs a "
-                         f"velocity reference (vref)")
+                         f"about {np.sqrt(2 * abs(excess[r])):.2f} g of horizontal acceleration): a moving base needs its "
+                         f"velocity or position as aiding (--aiding FILE)")
 
 
 #: Kinds of base a method can claim: stationary, swaying/moored (no translation beyond a disturbance), and
@@ -299,7 +300,7 @@ class Aligner(Protocol):
     description: str
     min_duration_s: float
 
-    def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
+    def align(self, imu: IMUData, site: Site, vref=None, init=None, aiding=None) -> AlignmentResult:
         """Align a batch of recordings.
 
         Parameters
@@ -307,12 +308,15 @@ class Aligner(Protocol):
         imu : IMUData
             R recordings on one time grid, body frame RFU.
         site : Site
-            Latitude, longitude, height.
+            Latitude, longitude, height at the initial state.
         vref : ndarray, shape (R, M, 3), optional
-            Reference velocity (ENU, m/s) at the end of each increment interval
-            (``imu.increments()[0]``); None means a stationary base (zero velocity).
+            Reference velocity (ENU, m/s) at the end of each increment interval (``imu.increments()[0]``): the
+            per-increment form of ``aiding`` (give one or the other).
         init : ndarray, shape (R, 3, 3) or (3, 3), optional
             Initial attitude guess C_bn; None lets the method initialise itself.
+        aiding : fusionbench.aiding.Aiding, optional
+            Velocity and/or position rows at a receiver's epochs, with lever arm and latency; None (and no
+            ``vref``): a stationary or swaying base, which the method checks.
         """
         ...
 
@@ -388,35 +392,21 @@ def load_method(spec: str, imu=None, vref_sigma=None, **options):
     return obj
 
 
-def coarse_then_fine(imu: IMUData, site: Site, vref, coarse, coarse_s: float, fine):
-    """Initialise with a coarse aligner on the first ``coarse_s`` seconds, then run ``fine`` on the rest.
+def call_align(method, imu: IMUData, site: Site, aiding=None, init=None) -> AlignmentResult:
+    """``method.align`` with ``aiding`` (an :class:`fusionbench.aiding.Aiding` or None) and ``init``, as the runner and
+    the command line call every method: a method whose ``align`` takes no ``aiding`` (a user's aligner written for
+    earlier versions) gets the rows as ``vref``, a velocity at every increment end, where they are one (or rows at
+    rest: then None), and a one-line refusal naming it otherwise."""
+    import inspect
 
-    For fine aligners that need an initial attitude within a few degrees but must accept any
-    heading. ``coarse`` is an aligner (e.g. ``fusionbench.coarse.InertialCoarseAligner``), given the same part
-    of ``vref`` (R, M, 3) when there is one; ``fine(imu_rest, vref_rest, C0, v0)`` returns the fine aligner's
-    AlignmentResult on the remaining increments from the coarse attitude ``C0`` (R, 3, 3), with ``v0`` (R, 3)
-    the reference velocity at the hand-over (the coarse part's last sample; None without a reference). The
-    histories are joined; arrays of the fine result's ``extra`` shaped (R, M, ...) get NaN over the coarse part.
-    """
-    t, dth, dv = imu.increments()
-    k0 = int(round(coarse_s / imu.dt))
-    if not 0 < k0 < t.size - 1:
-        raise ValueError(f"duration: the coarse stage of {coarse_s:g} s leaves no data for fine alignment "
-                         f"in {imu.duration:g} s")
-    vref = None if vref is None else np.asarray(vref)
-    first = coarse.align(IMUData(t[:k0], dth[:, :k0], dv[:, :k0], "increment"), site,
-                         vref=None if vref is None else vref[:, :k0])
-    rest = IMUData(t[k0:], dth[:, k0:], dv[:, k0:], "increment")
-    res = fine(rest, None if vref is None else vref[:, k0:], first.C_bn_final, None if vref is None else vref[:, k0 - 1])
-    m = first.t.size
-
-    def padded(val):  # a history of the fine stage, NaN over the coarse one
-        if isinstance(val, np.ndarray) and val.ndim >= 2 and val.shape[:2] == res.C_bn.shape[:2]:
-            return np.concatenate([np.full((val.shape[0], m) + val.shape[2:], np.nan), val], axis=1)
-        return val
-
-    return AlignmentResult(res.method, np.concatenate([first.t, res.t]), np.concatenate([first.C_bn, res.C_bn], axis=1),
-                           {k: padded(v) for k, v in res.extra.items()},
-                           sigma_phi=None if res.sigma_phi is None else padded(res.sigma_phi),
-                           series={k: padded(np.asarray(v)) for k, v in res.series.items()}, figures=res.figures,
-                           imu_model=res.imu_model, causal=res.causal)
+    try:
+        takes = "aiding" in inspect.signature(method.align).parameters
+    except (TypeError, ValueError):
+        takes = False
+    if takes or aiding is None:
+        return method.align(imu, site, init=init, **({"aiding": aiding} if aiding is not None else {}))
+    vref = aiding.dense_velocity(imu.increments()[0], imu.runs)
+    if vref is None and not aiding.is_at_rest():
+        raise ValueError(f"{getattr(method, 'name', 'method')}: aiding: its align() takes no aiding (only vref, a "
+                         f"velocity at every increment end), found {aiding.t.size} rows of {aiding.source}")
+    return method.align(imu, site, vref=vref, init=init)

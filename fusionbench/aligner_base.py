@@ -10,17 +10,22 @@ The policy, in this order (each refusal a ``ValueError`` of one line naming the 
 expected and what was found: ``"kf: site latitude: expected a latitude between -89 and 89 deg, found 89.5 deg"``):
 
 1. **data** (:func:`fusionbench.inputs.check_inputs`): ``imu`` an :class:`~fusionbench.imudata.IMUData` with
-   finite samples; ``vref`` of shape (R, M, 3) or (M, 3), finite; ``init`` of shape (3, 3) or (R, 3, 3), finite
-   rotation matrices. ``vref`` and ``init`` are broadcast over the R recordings, so ``_align`` gets arrays of
-   shape (R, M, 3) and (R, 3, 3) (or None).
-2. **init** when the method needs one (``supports.needs_init``: a navigator starts from an alignment).
-3. **site latitude** within +-:attr:`~AlignerBase.max_latitude_deg` (:func:`fusionbench.earth.check_latitude`).
-4. **the IMU model** the method was given (its ``spec``; None: not checked) must leave the azimuth observable at
+   finite samples; ``init`` of shape (3, 3) or (R, 3, 3), finite rotation matrices, broadcast over the R recordings.
+2. **aiding** (:class:`fusionbench.aiding.Aiding`; the per-increment ``vref`` array of earlier versions is converted
+   to one, and both at once are refused): rows for R recordings, every row valid inside the record. A method
+   that does not consume the aiding of a moving base (:attr:`AlignerBase.uses_aiding` False: the compass loops,
+   the analytic coarse alignment) takes only rows at rest (a fixed base's zero-velocity reference).
+3. **init** when the method needs one (``supports.needs_init``: a navigator starts from an alignment).
+4. **site latitude** within +-:attr:`~AlignerBase.max_latitude_deg` (:func:`fusionbench.earth.check_latitude`).
+5. **the IMU model** the method was given (its ``spec``; None: not checked) must leave the azimuth observable at
    the site (:func:`fusionbench.aligner.check_azimuth_observable`: a MEMS gyro's bias hides the earth rate).
-5. **duration**: at least :attr:`~AlignerBase.min_duration_s` of data (``imu.duration``).
+6. **duration**: at least :attr:`~AlignerBase.min_duration_s` of data (``imu.duration``).
+7. **a base that moves**: without aiding of its motion (none, or only rows at rest), an aligner checks that the
+   record is of a stationary or swaying base (:func:`fusionbench.motion.check_stationary`) and refuses one that
+   moves anywhere in it, naming ``--aiding``.
 
-What only a method can judge (a step the data's sample interval cannot carry, a base that moves without a
-reference) it checks in ``_align``, with messages of the same form.
+What only a method can judge (a step the data's sample interval cannot carry) it checks in ``_align``, with
+messages of the same form.
 
 Options are checked when the method is built, from the constructor's own defaults (:func:`check_option`): an
 option whose default is a number must be a finite number of that kind (a whole number where the default is
@@ -39,7 +44,8 @@ import numbers
 
 import numpy as np
 
-from . import earth
+from . import earth, motion
+from .aiding import Aiding
 from .aligner import AlignmentResult, Site, check_azimuth_observable, supports
 from .imudata import IMUData
 from .inputs import check_init, check_inputs
@@ -59,6 +65,9 @@ class AlignerBase:
         conditions the conformance matrix runs) may be less: this is where it refuses.
     spec : IMUSpec or None
         The IMU model the method was given (its ``imu`` option); the azimuth observability is checked with it.
+    uses_aiding : bool
+        Whether the method consumes the aiding of a moving base (velocity or position rows at their epochs, with
+        the lever arm and the latency); False: it takes only rows at rest.
     """
 
     name: str
@@ -66,6 +75,7 @@ class AlignerBase:
     min_duration_s: float = 0.0
     max_latitude_deg: float = 90.0
     spec = None
+    uses_aiding: bool = False
     #: Options that must be positive (besides being of their default's kind): the update interval at least.
     positive_options: tuple = ("step_s",)
 
@@ -92,22 +102,37 @@ class AlignerBase:
 
         cls.__init__ = checked
 
-    def align(self, imu: IMUData, site: Site, vref=None, init=None) -> AlignmentResult:
+    @property
+    def label(self) -> str:
+        """Who speaks in a refusal: the method's name (a stage of another method says whose, e.g.
+        ``"kf (coarse-i0 start)"``)."""
+        return self.name
+
+    def align(self, imu: IMUData, site: Site, vref=None, init=None, aiding=None) -> AlignmentResult:
         """Apply the input policy (module docstring), then align (:meth:`_align`); arguments as
         :meth:`fusionbench.aligner.Aligner.align`."""
-        vref, init = self.check(imu, site, vref, init)
-        return self._align(imu, site, vref, init)
+        aiding, init = self.check(imu, site, vref, init, aiding)
+        return self._align(imu, site, aiding, init)
 
-    def check(self, imu: IMUData, site: Site, vref=None, init=None):
-        """The input policy alone: ``(vref, init)`` checked and broadcast over the runs (or None), or a one-line
-        ``ValueError`` naming the method and the field."""
-        vref, init = check_inputs(imu, vref, init, self.name, init_required=supports(self).needs_init)
+    def check(self, imu: IMUData, site: Site, vref=None, init=None, aiding=None):
+        """The input policy alone: ``(aiding, init)`` checked and broadcast over the runs (an
+        :class:`~fusionbench.aiding.Aiding` for R recordings or None; (R, 3, 3) or None), or a one-line ``ValueError``
+        naming the method and the field."""
+        _, init = check_inputs(imu, None, init, self.name, init_required=supports(self).needs_init)
+        aiding = as_aiding(imu, vref, aiding, self.name)
+        if aiding is not None and not aiding.is_at_rest() and not self.uses_aiding:
+            raise ValueError(f"{self.name}: aiding: expected none or rows at rest ({self.name} aligns a stationary or "
+                             f"swaying base and takes no aiding of a moving one), found {aiding.source} with "
+                             f"{'velocities' if aiding.has_velocity else 'positions'} of a moving base: use a method "
+                             f"that claims a moving base (fusionbench list)")
         earth.check_latitude(site.lat, f"{self.name}: site latitude", self.max_latitude_deg)
         check_azimuth_observable(self.spec, site, self.name)
         if imu.duration < self.min_duration_s:
             raise ValueError(f"{self.name}: duration: expected at least {self.min_duration_s:g} s of data, found "
                              f"{imu.duration:g} s")
-        return vref, init
+        if (aiding is None or aiding.is_at_rest()) and not supports(self).needs_init:
+            motion.check_stationary(imu, site, self.label)
+        return aiding, init
 
     def align_chunks(self, chunks, site: Site, record, init=None) -> AlignmentResult:
         """Align R recordings given as consecutive chunks, for a method that defines ``_align_chunks`` (a long
@@ -136,7 +161,7 @@ class AlignerBase:
                              f"{record.duration:g} s")
         return self._align_chunks(chunks, site, init, record.dt, record.t0, record.runs)
 
-    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
+    def _align(self, imu: IMUData, site: Site, aiding, init) -> AlignmentResult:
         """The method itself, on arguments the policy has checked.
 
         Parameters
@@ -145,12 +170,12 @@ class AlignerBase:
             R recordings, body RFU, finite, at least ``min_duration_s`` long.
         site : Site
             Within the method's latitude limit.
-        vref : ndarray, shape (R, M, 3), or None
-            Reference velocity (ENU, m/s) at the increment ends (``imu.increments()[0]``).
+        aiding : fusionbench.aiding.Aiding or None
+            Rows for the R recordings, valid inside the record; only rows at rest unless ``uses_aiding``.
         init : ndarray, shape (R, 3, 3), or None
             Initial attitude C_bn, rotation matrices.
         """
-        raise NotImplementedError(f"{type(self).__name__}: implement _align(imu, site, vref, init)")
+        raise NotImplementedError(f"{type(self).__name__}: implement _align(imu, site, aiding, init)")
 
 
 def check_option(method, name, value, default, positive=False):
@@ -171,3 +196,79 @@ def check_option(method, name, value, default, positive=False):
     if not ok:
         raise ValueError(f"{method}: option {name}: expected {kind}, found {value!r}")
 
+
+
+def as_aiding(imu, vref=None, aiding=None, name="method"):
+    """The aiding of a record, checked: ``aiding`` (an :class:`~fusionbench.aiding.Aiding`) or the per-increment
+    ``vref`` array (R, M, 3) or (M, 3), ENU m/s at ``imu.increments()[0]``, converted (:meth:`Aiding.from_vref`); for
+    R = ``imu.runs`` recordings, every row valid inside the record; None when neither is given. One-line
+    ``ValueError`` naming ``name`` otherwise."""
+    if vref is not None and aiding is not None:
+        raise ValueError(f"{name}: vref and aiding: expected one of them (vref is the per-increment form of aiding), "
+                         f"found both")
+    if vref is not None:
+        t_end = imu.increments()[0]
+        try:
+            v = np.asarray(vref, dtype=float)
+            aiding = Aiding.from_vref(t_end, v, source="vref")
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name}: {str(exc).splitlines()[0]}") from None
+    if aiding is None:
+        return None
+    if not isinstance(aiding, Aiding):
+        raise ValueError(f"{name}: aiding: expected a fusionbench.aiding.Aiding, found {type(aiding).__name__}")
+    try:
+        aiding = aiding.for_runs(imu.runs)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    aiding.check_record(imu.t0, imu.t_last, imu.dt, name)
+    return aiding
+
+
+def coarse_then_fine(imu: IMUData, site: Site, aiding, coarse, coarse_s: float, fine):
+    """Initialise with a coarse aligner on the first ``coarse_s`` seconds, then run ``fine`` on the rest.
+
+    For fine aligners that need an initial attitude within a few degrees but must accept any heading. ``coarse`` is
+    an aligner (e.g. ``fusionbench.coarse.InertialCoarseAligner``), given the rows of ``aiding`` (an
+    :class:`~fusionbench.aiding.Aiding` or None) valid in its part; ``fine(imu_rest, aiding_rest, C0, t_handover)``
+    returns the fine aligner's AlignmentResult on the remaining increments from the coarse attitude ``C0`` (R, 3, 3)
+    at ``t_handover`` (s, the coarse part's last sample), with the rows valid after it (or None). The histories are
+    joined; arrays of the fine result's ``extra`` shaped (R, M, ...) get NaN over the coarse part.
+    """
+    t, dth, dv = imu.increments()
+    k0 = int(round(coarse_s / imu.dt))
+    if not 0 < k0 < t.size - 1:
+        raise ValueError(f"duration: the coarse stage of {coarse_s:g} s leaves no data for fine alignment "
+                         f"in {imu.duration:g} s")
+    t_hand = float(t[k0 - 1])
+    first = coarse.align(IMUData(t[:k0], dth[:, :k0], dv[:, :k0], "increment"), site,
+                         aiding=None if aiding is None else aiding.window(-np.inf, t_hand))
+    rest = IMUData(t[k0:], dth[:, k0:], dv[:, k0:], "increment")
+    res = fine(rest, None if aiding is None else aiding.window(t_hand, np.inf), first.C_bn_final, t_hand)
+    m = first.t.size
+
+    def padded(val):  # a history of the fine stage, NaN over the coarse one
+        if isinstance(val, np.ndarray) and val.ndim >= 2 and val.shape[:2] == res.C_bn.shape[:2]:
+            return np.concatenate([np.full((val.shape[0], m) + val.shape[2:], np.nan), val], axis=1)
+        return val
+
+    return AlignmentResult(res.method, np.concatenate([first.t, res.t]), np.concatenate([first.C_bn, res.C_bn], axis=1),
+                           {k: padded(v) for k, v in res.extra.items()},
+                           sigma_phi=None if res.sigma_phi is None else padded(res.sigma_phi),
+                           series={k: padded(np.asarray(v)) for k, v in res.series.items()}, figures=res.figures,
+                           imu_model=res.imu_model, causal=res.causal)
+
+
+def per_increment_velocity(aiding, imu, name="method"):
+    """The aiding as a velocity at every increment end (R, M, 3), ENU m/s, for a method that reads one there (the
+    compass loops' zero-velocity reference): the rows themselves when they lie exactly there (the simulator's
+    per-increment reference), None without aiding or for rows at rest elsewhere (the zero velocity the method
+    assumes anyway); a one-line ``ValueError`` naming ``name`` for rows of a moving base elsewhere."""
+    if aiding is None:
+        return None
+    t_end = imu.increments()[0]
+    v = aiding.dense_velocity(t_end, imu.runs)
+    if v is None and not aiding.is_at_rest():
+        raise ValueError(f"{name}: aiding: expected a velocity at every increment end, found {aiding.t.size} rows at "
+                         f"{aiding.rate_hz():.3g} Hz")
+    return v

@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from . import earth
 from .aligner import AlignmentResult, Site, Supports, check_not_accelerating
-from .aligner_base import AlignerBase
+from .aligner_base import AlignerBase, per_increment_velocity
 from .attitude import rotvec_to_dcm
 from .imu import load_spec
 from .imudata import IMUData
@@ -74,8 +74,8 @@ class CoarseAligner(AlignerBase):
         self.history_points = int(history_points)
         self.spec = None if imu is None else load_spec(imu)
 
-    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
-        """Align every recording of ``imu`` (stationary base); ``vref`` and ``init`` are not used.
+    def _align(self, imu: IMUData, site: Site, aiding, init) -> AlignmentResult:
+        """Align every recording of ``imu`` (stationary base); ``aiding`` (rows at rest) and ``init`` are not used.
 
         Returns an :class:`AlignmentResult` whose last attitude uses the whole recording.
         """
@@ -281,6 +281,7 @@ class InertialCoarseAligner(AlignerBase):
     positive_options = ("history_points", "fit_points")
 
     name = "coarse-i0"
+    uses_aiding = True
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0)
     description = "inertial-frame coarse alignment (gravity turning with the earth), robust to sway; in motion with vref"
     min_duration_s = 10.0
@@ -300,11 +301,17 @@ class InertialCoarseAligner(AlignerBase):
         self.max_gravity_excess = float(max_gravity_excess)
         self.caller = caller
 
+    @property
+    def label(self) -> str:
+        """The method's name in a refusal: ``coarse-i0``, or ``"<caller> (coarse-i0 start)"`` as another method's
+        first stage."""
+        return self.name if self.caller is None else f"{self.caller} (coarse-i0 start)"
+
     def motion_threshold_mps(self, duration):
         """Largest ``fit_residual_mps`` (m/s) accepted without a reference on a record of ``duration`` s."""
         return np.inf if self.motion_mps is None else self.motion_mps + self.motion_mps_per_s2 * float(duration) ** 2
 
-    def _align(self, imu: IMUData, site: Site, vref, init) -> AlignmentResult:
+    def _align(self, imu: IMUData, site: Site, aiding, init) -> AlignmentResult:
         """Align every recording of ``imu``; ``init`` is not used.
 
         Parameters
@@ -318,7 +325,8 @@ class InertialCoarseAligner(AlignerBase):
             swaying base, checked (see the class docstring): a ValueError naming the method and the
             figure when the data show a moving base.
         """
-        who = self.name if self.caller is None else f"{self.caller} (coarse-i0 start)"
+        who = self.label
+        vref = per_increment_velocity(aiding, imu, who)
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
         keep = np.unique(np.linspace(0, N - 1, max(self.history_points, self.fit_points) * 4).round().astype(int))

@@ -18,7 +18,8 @@ from joblib import Parallel, delayed
 
 from . import imu as imu_mod
 from . import earth, metrics, streaming, units
-from .aligner import check_time_rule
+from .aiding import Aiding
+from .aligner import call_align, check_time_rule
 from .imudata import IMUData
 from .imufiles import atomic_open
 from .progress import bar as progress_bar
@@ -100,14 +101,15 @@ def _decimate(t):
 
 
 def _simulate_batch(scn, first_run, runs, seed, duration):
-    """Runs first_run..first_run+runs-1: (trajectory, IMU data, velocity reference or None, initial guess or None)."""
+    """Runs first_run..first_run+runs-1: (trajectory, IMU data, aiding or None, initial guess or None)."""
     traj = scn.trajectory(duration)
     data = imu_mod.simulate(traj, scn.imu_spec, scn.dt, runs=runs, seed=seed, first_run=first_run)
     t_inc, _, _ = data.increments()
-    vref = None  # a fixed base without a reference's noise: the zero-velocity assumption, as a user's align makes it
+    aiding = None  # a fixed base without a reference's noise: the zero-velocity assumption, as a user's align makes it
     if streaming.needs_vref(scn, traj):
         vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
-    return traj, data, vref, scn.initial_guess(traj.truth([data.t0]).C_bn[0])
+        aiding = Aiding.from_vref(t_inc, vref, at_rest=traj.translation.is_static(), source="the scenario's reference")
+    return traj, data, aiding, scn.initial_guess(traj.truth([data.t0]).C_bn[0])
 
 
 def _stream_batch(scn, first_run, runs, seed, duration):
@@ -141,7 +143,7 @@ def _run_unit(scn, name, first_run, runs, seed, duration, refusals=False):
 
 def _align_batch(scn, name, sim, first_run, refusals):
     """One method on one simulated batch: its BatchOutcome, or its refusal message."""
-    traj, data, vref, init = sim
+    traj, data, aiding, init = sim
     method = scn.method(name)
     desc = method.description
     if name in scn.variants:
@@ -151,7 +153,7 @@ def _align_batch(scn, name, sim, first_run, refusals):
     t0 = time.perf_counter()
     try:
         res = method.align_chunks(data, scn.site, data, init=init) if stream else \
-            method.align(data, scn.site, vref=vref, init=init)
+            call_align(method, data, scn.site, aiding, init)
     except ValueError as exc:
         if not refusals:
             raise
@@ -171,7 +173,7 @@ def _align_batch(scn, name, sim, first_run, refusals):
     elif stream:  # a smoother's settling needs its record's prefixes, which a stream does not hold: not measured
         settle, done = np.full(phi.shape[0], np.nan), np.abs(phi[:, -1, 2] - limit_u[-1]) <= band
     else:  # a smoother: each estimate uses the whole record, so settling is read off growing prefixes
-        settle, done = _prefix_settling(method, data, vref, init, traj, scn, phi[:, -1, 2], limit_u[-1],
+        settle, done = _prefix_settling(method, data, aiding, init, traj, scn, phi[:, -1, 2], limit_u[-1],
                                         first_run)
     idx = _decimate(res.t)
     t_h, phi_h = res.t[idx], phi[:, idx]
@@ -212,7 +214,7 @@ def _limits(scn, traj, t, C_bn):
                                       f_n=f_n, w_in=w_ie + w_en)
 
 
-def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end, first_run=0):
+def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end, first_run=0):
     """Settling of a method that is not causal (a smoother), per run: its final azimuth error on the prefixes of
     the record ending every PREFIX_STEP_S seconds, against the limit at each prefix's end; the first prefix
     end after which every later one (and the whole record) is inside the band. Prefixes are aligned from the
@@ -232,7 +234,7 @@ def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end, f
     if n_meas == 0:
         return result, ~first_out
     data = IMUData(data.t, data.gyro[:n_meas], data.accel[:n_meas], data.kind)
-    vref = None if vref is None else vref[:n_meas]
+    aiding = None if aiding is None else aiding.select_runs(slice(0, n_meas))
     settle = np.where(first_out[:n_meas], t_inc[-1], np.nan)
     prev = np.full(data.runs, t_inc[-1])
     step = max(1, int(round(PREFIX_STEP_S / data.dt)))
@@ -244,7 +246,8 @@ def _prefix_settling(method, data, vref, init, traj, scn, phiu_end, limit_end, f
         part = IMUData(data.t[:n], data.gyro[:, :n], data.accel[:, :n], data.kind)
         if part.duration < getattr(method, "min_duration_s", 0.0):
             break
-        res = method.align(part, scn.site, vref=None if vref is None else vref[:, :k + 1], init=init)
+        res = call_align(method, part, scn.site, None if aiding is None else aiding.window(-np.inf, t_inc[k]),
+                         None if init is None else init)
         C_true = traj.truth([t_inc[k]]).C_bn
         err = metrics.misalignment_history(res.C_bn[:, -1:], C_true)[:, 0, 2] - _limits(scn, traj, [t_inc[k]], C_true)[0, 2]
         out = np.isnan(settle) & (np.abs(err) > band)

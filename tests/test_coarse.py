@@ -180,8 +180,8 @@ def test_an_acceleration_during_the_record_is_refused_naming_the_method_and_the_
     T = 60.0
     tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), accel=0.01 * 9.80665, start=start_frac * T, duration=T)
     data = simulate(tr, IMUSpec(), 0.02)
-    with pytest.raises(ValueError, match=r"^eso-td \(coarse-i0 start\): the base moves .* m/s rms.*needs a velocity "
-                                         r"reference \(vref\)$"):
+    with pytest.raises(ValueError, match=r"^eso-td \(coarse-i0 start\): the base moves .* m/s of horizontal velocity.*"
+                                         r"needs its velocity or position as aiding \(--aiding FILE\)$"):
         InertialCoarseAligner(caller="eso-td").align(data, Site(tr.lat))
     res = InertialCoarseAligner(motion_mps=None).align(data, Site(tr.lat))
     resid = res.extra["fit_residual_mps"][0]
@@ -209,7 +209,7 @@ def test_a_constant_acceleration_is_a_tilt_but_at_0_1_g_the_specific_force_shows
         expected = np.sqrt(1 + (acc / g) ** 2) - 1 - np.sum(t_fit**2 * loss) / np.sum(t_fit**2)
         assert res.extra["gravity_excess"][0] == pytest.approx(expected, abs=0.02e-3)
         if refused:
-            with pytest.raises(ValueError, match=r"^coarse-i0: the base accelerates .*\+4\.\d mg.*about 0\.10 g.*vref"):
+            with pytest.raises(ValueError, match=r"^coarse-i0: the base accelerates .*\+4\.\d mg.*about 0\.10 g.*--aiding"):
                 InertialCoarseAligner().align(data, Site(tr.lat))
         else:
             InertialCoarseAligner().align(data, Site(tr.lat))
