@@ -94,7 +94,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from fusionbench.aligner import AlignmentResult, Site, Supports, variant
+from fusionbench.aligner import AlignmentResult, Site, variant
+from fusionbench.claims import Supports
 from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imu import load_spec
 from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
@@ -232,7 +233,7 @@ class ADRCGyrocompass(AlignerBase):
         Keep refining after the shot (default); False keeps the shot's azimuth.
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
-        rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
+        rate (:func:`fusionbench.claims.check_azimuth_observable`); None: not checked.
     engine : {"numba", "numpy"}
         The whole control loop (strapdown, ESO, NLSEF, azimuth fit) compiled, all runs in one call
         (:mod:`adrc.gyrocompass_compiled`; default), or the NumPy loop over control steps, the reference: the same

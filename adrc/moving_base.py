@@ -270,7 +270,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, check_not_accelerating, variant
+from fusionbench.aligner import AlignmentResult, Site, variant
+from fusionbench.claims import Supports, check_not_accelerating
 from fusionbench.aligner_base import AlignerBase, coarse_then_fine, per_increment_velocity
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
@@ -837,7 +838,7 @@ class ESOTDAligner(AlignerBase):
 
     def _check_not_accelerating(self, dvel, dt, site):
         """Without a reference: refuse a record whose mean specific force exceeds gravity
-        (:func:`fusionbench.aligner.check_not_accelerating`)."""
+        (:func:`fusionbench.claims.check_not_accelerating`)."""
         g = earth.gravity(site.lat, site.h)
         excess = np.linalg.norm(dvel, axis=-1).mean(axis=1) / (dt * g) - 1.0
         check_not_accelerating(excess, self.max_gravity_excess, self.name)

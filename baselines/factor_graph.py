@@ -183,7 +183,8 @@ import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth, units
-from fusionbench.aligner import AlignmentResult, Site, Supports
+from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.claims import Supports
 from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.attitude import dcm_to_rotvec, orthonormalize
 from fusionbench.imu import IMUSpec, load_spec
@@ -272,7 +273,7 @@ class FactorGraphAligner(AlignerBase):
         default the ``navigation`` preset) from which the white-noise densities, the bias priors and the bias
         random walk come (:func:`noise_model`); its noise schedules are not used (a change of noise level is
         what :class:`AdaptiveFactorGraphAligner` estimates). An IMU whose gyro bias hides the earth rate is
-        refused (:func:`fusionbench.aligner.check_azimuth_observable`). None:
+        refused (:func:`fusionbench.claims.check_azimuth_observable`). None:
         seed000's white noise, bias priors 0.1 deg/h and 100 ug, a constant bias. Its name is
         reported as the result's ``imu_model``.
     gyro_noise : float or (3,) float, optional

@@ -45,7 +45,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports
+from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.claims import Supports
 from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imu import load_spec
 from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
@@ -172,7 +173,7 @@ class PIDGyrocompass(AlignerBase):
         times (s). Narrower loops later filter more noise; switching keeps the loop states.
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
-        rate (:func:`fusionbench.aligner.check_azimuth_observable`); None: not checked.
+        rate (:func:`fusionbench.claims.check_azimuth_observable`); None: not checked.
     engine : {"numba", "numpy"}
         The whole control loop (strapdown, azimuth fit, level and compass loops) compiled, all runs in one call
         (:mod:`baselines.gyrocompass_compiled`; default), or the NumPy loop over control steps, the reference: the

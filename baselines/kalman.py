@@ -33,7 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site, Supports, azimuth_bias_ratio
+from fusionbench.aligner import AlignmentResult, Site
+from fusionbench.claims import Supports, azimuth_bias_ratio
 from fusionbench.aligner_base import AlignerBase, coarse_then_fine, per_increment_velocity
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.imu import load_spec

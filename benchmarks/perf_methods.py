@@ -46,7 +46,7 @@ import time
 
 import numpy as np
 
-from fusionbench import aligner, trajectory
+from fusionbench import aligner, claims, trajectory
 from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, simulate
 from fusionbench.strapdown import NavState, Strapdown
@@ -139,7 +139,7 @@ def main(argv=None):
     names = args.methods or sorted(aligner.available_methods())
     for name in names:
         cls = aligner.entry_class(aligner.GROUP, name)
-        sup = aligner.supports(cls)
+        sup = claims.supports(cls)
         base = base_for(sup)
         if sup.needs_init or base is None:
             out["skipped"][name] = "needs an initial attitude (navigator)" if sup.needs_init else "claims no base here"

@@ -50,7 +50,8 @@ import numba
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Supports
+from fusionbench.aligner import AlignmentResult
+from fusionbench.claims import Supports
 from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imudata import IMUData
 from fusionbench.inputs import check_init

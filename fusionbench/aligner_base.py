@@ -18,7 +18,7 @@ expected and what was found: ``"kf: site latitude: expected a latitude between -
 3. **init** when the method needs one (``supports.needs_init``: a navigator starts from an alignment).
 4. **site latitude** within +-:attr:`~AlignerBase.max_latitude_deg` (:func:`fusionbench.earth.check_latitude`).
 5. **the IMU model** the method was given (its ``spec``; None: not checked) must leave the azimuth observable at
-   the site (:func:`fusionbench.aligner.check_azimuth_observable`: a MEMS gyro's bias hides the earth rate).
+   the site (:func:`fusionbench.claims.check_azimuth_observable`: a MEMS gyro's bias hides the earth rate).
 6. **duration**: at least :attr:`~AlignerBase.min_duration_s` of data (``imu.duration``).
 7. **a base that moves**: without aiding of its motion (none, or only rows at rest), an aligner checks that the
    record is of a stationary or swaying base (:func:`fusionbench.motion.check_stationary`) and refuses one that
@@ -46,7 +46,8 @@ import numpy as np
 
 from . import earth, motion
 from .aiding import Aiding
-from .aligner import AlignmentResult, Site, check_azimuth_observable, supports
+from .aligner import AlignmentResult, Site
+from .claims import check_azimuth_observable, supports
 from .imudata import IMUData
 from .inputs import check_init, check_inputs
 

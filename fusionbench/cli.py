@@ -24,7 +24,8 @@ import numpy as np
 from joblib import parallel_config
 
 from . import __version__, cli_record, progress, provenance, reportdir, scenarios
-from .aligner import (GROUP, MAX_BIAS_TO_EARTH_RATE, available_methods, supports, uses_noise_model)
+from .aligner import GROUP, available_methods, uses_noise_model
+from .claims import MAX_BIAS_TO_EARTH_RATE, supports
 from .cli_common import exception_text, integer, named
 
 #: Exit statuses: a check found a regression; bad input or a failed method; interrupted (128 + SIGINT); the

@@ -28,7 +28,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import earth
-from .aligner import AlignmentResult, Site, Supports, check_not_accelerating
+from .aligner import AlignmentResult, Site
+from .claims import Supports, check_not_accelerating
 from .aligner_base import AlignerBase, per_increment_velocity
 from .attitude import rotvec_to_dcm
 from .imu import load_spec

@@ -7,7 +7,7 @@ reference. The matrix file lists about twenty of them so that every level of eve
 product. Each condition becomes an ordinary alignment scenario (:func:`condition_scenario`) run by
 :func:`fusionbench.runner.run_alignment`: the methods start on their own (no initial guess), get the reference
 only where the base moves or the reference is noisy, and get the condition's IMU as their model; a method runs
-only on the conditions its ``supports`` claims (:class:`fusionbench.aligner.Supports`).
+only on the conditions its ``supports`` claims (:class:`fusionbench.claims.Supports`).
 
 Each cell (method x condition) is scored at the last sample, over the Monte Carlo runs:
 
@@ -37,11 +37,12 @@ from pathlib import Path
 import numpy as np
 from joblib import Parallel, delayed
 
-from . import aligner, fields, imu, metrics, units
-from .aligner import available_methods, azimuth_bias_ratio, supports
+from . import aligner, claims, fields, imu, metrics, units
+from .aligner import available_methods
+from .claims import azimuth_bias_ratio, supports
 from .progress import bar as progress_bar
 
-#: Bases of a condition: kind claimed (:data:`fusionbench.aligner.BASES`), sway amplitude (deg) and frequency (Hz)
+#: Bases of a condition: kind claimed (:data:`fusionbench.claims.BASES`), sway amplitude (deg) and frequency (Hz)
 #: of [pitch, roll, yaw].
 BASES = {
     "static": ("static", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
@@ -171,7 +172,7 @@ def parse(data, src="<conformance>"):
         expect = fields.string(c, "expect", src, "align", choices=("align", "refuse", "auto"), label=f"{label}.expect")
         if expect == "auto":  # refuse where the gyro bias hides the earth rate (every aligner given the model does)
             ratio = azimuth_bias_ratio(spec if cimu == sensor else imu.PRESETS[cimu], np.radians(lat))
-            expect = "refuse" if ratio > aligner.MAX_BIAS_TO_EARTH_RATE else "align"
+            expect = "refuse" if ratio > claims.MAX_BIAS_TO_EARTH_RATE else "align"
         conds.append(Condition(
             cname, fields.string(c, "base", src, choices=BASES, label=f"{label}.base"), lat,
             fields.number(c, "heading_deg", src, lo=-360.0, hi=360.0, label=f"{label}.heading_deg"), cimu,

@@ -29,7 +29,7 @@ The threshold is 0.236 m/s for a 120-s window. A gyro whose bias exceeds about 3
 enough to exceed it on a static base too, so the refusal names both causes. A constant acceleration from the first
 sample to the last is, to first order, a tilt (the equivalence principle), which no fit of the record alone can
 tell from one; it raises the mean specific force above gravity by ``a^2 / 2 g^2``
-(:func:`fusionbench.aligner.check_not_accelerating`: refused beyond :data:`MAX_GRAVITY_EXCESS`, about 0.08 g). A
+(:func:`fusionbench.claims.check_not_accelerating`: refused beyond :data:`MAX_GRAVITY_EXCESS`, about 0.08 g). A
 base that moves at one constant velocity for the whole record is not detectable from the IMU: give its velocity.
 """
 
@@ -39,7 +39,7 @@ import numba
 import numpy as np
 
 from . import earth
-from .aligner import check_not_accelerating
+from .claims import check_not_accelerating
 
 #: Length of the windows fitted one by one, s (the whole record when shorter).
 WINDOW_S = 120.0

@@ -7,7 +7,7 @@ import pytest
 
 from fusionbench.coarse import CoarseAligner
 from fusionbench import attitude, metrics, scenarios, units
-from fusionbench.aligner import MAX_BIAS_TO_EARTH_RATE, Supports, azimuth_bias_ratio
+from fusionbench.claims import MAX_BIAS_TO_EARTH_RATE, Supports, azimuth_bias_ratio
 from fusionbench.check import compare
 from fusionbench.fields import FieldError
 from fusionbench.imu import PRESETS

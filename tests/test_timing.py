@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from fusionbench import attitude, units
-from fusionbench.aligner import (AlignmentResult, Site, available_methods, check_time_rule,
-                                 load_method, supports)
+from fusionbench.aligner import AlignmentResult, Site, available_methods, check_time_rule, load_method
+from fusionbench.claims import supports
 from fusionbench.imudata import IMUData
 from fusionbench.imufiles import read_imu, write_csv, write_npz, write_psins
 from tests import independent

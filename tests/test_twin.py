@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from fusionbench import aligner, imu, scenarios, units
+from fusionbench import claims, imu, scenarios, units
 
 
 def cli(*args, cwd=None):
@@ -76,8 +76,8 @@ def test_twin_runs_the_user_sensor_at_the_user_site(tmp_path):
 def test_expect_auto_refuses_where_the_gyro_bias_hides_the_earth_rate(tmp_path):
     mems = scenarios.get("twin", {"imu": "mems", "site": {"lat_deg": 34.0}})
     tact = scenarios.get("twin", {"imu": "navigation", "site": {"lat_deg": 34.0}})
-    ratio = aligner.azimuth_bias_ratio(imu.PRESETS["mems"], np.radians(34.0))
-    assert ratio > aligner.MAX_BIAS_TO_EARTH_RATE
+    ratio = claims.azimuth_bias_ratio(imu.PRESETS["mems"], np.radians(34.0))
+    assert ratio > claims.MAX_BIAS_TO_EARTH_RATE
     assert {c.expect for c in mems.conditions} == {"refuse"}
     assert {c.expect for c in tact.conditions} == {"align"}
 
