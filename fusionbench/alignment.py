@@ -24,8 +24,12 @@ class AlignmentExperiment:
 
     def load_method(self, scn, spec, **options):
         """A method with the scenario's IMU spec (the true model) and velocity-reference noise (the largest axis,
-        m/s per sample) offered to a method that takes them (:func:`fusionbench.aligner.load_method`)."""
-        given = {"imu": scn.imu_spec, "vref_sigma": float(max(scn.vref_spec.sigma))}
+        m/s per sample: ``[vref]``'s, or ``[aiding]``'s velocity noise) offered to a method that takes them
+        (:func:`fusionbench.aligner.load_method`)."""
+        sigma = scn.vref_spec.sigma
+        if scn.aiding_spec is not None and scn.aiding_spec.velocity_sigma is not None:
+            sigma = scn.aiding_spec.velocity_sigma
+        given = {"imu": scn.imu_spec, "vref_sigma": float(max(sigma))}
         return aligner.load_method(spec, **{**given, **options})  # a variant's own imu / vref_sigma win
 
     def run(self, scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, refusals=False,

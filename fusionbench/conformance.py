@@ -31,200 +31,22 @@ condition) and adds ``conditions``, ``cells`` and ``scoreboard``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 from joblib import Parallel, delayed
 
-from . import aligner, claims, fields, imu, metrics, units
+from . import aligner, units
 from .aligner import available_methods
 from .claims import azimuth_bias_ratio, supports
+from .conformance_file import Matrix, condition_bound, condition_scenario, parse  # noqa: F401 (the experiment's)
 from .progress import bar as progress_bar
-
-#: Bases of a condition: kind claimed (:data:`fusionbench.claims.BASES`), sway amplitude (deg) and frequency (Hz)
-#: of [pitch, roll, yaw].
-BASES = {
-    "static": ("static", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
-    "sway-mild": ("sway", (1.0, 1.5, 2.0), (0.2, 0.1, 0.05)),
-    "sway-table1": ("sway", (5.0, 7.0, 9.0), (0.5, 0.3, 0.2)),
-    "moving": ("moving", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
-}
-#: Acceleration of the moving base along its heading, m/s^2 (0.1 g).
-MOVING_ACCEL = 0.1 * units.G0
-#: Mean tilt of every base, deg (pitch, roll): a level IMU would hide sign errors between the level axes.
-TILT_DEG = (1.0, -2.0)
-_TOP = {"name", "description", "kind", "experiment", "duration_s", "rate_hz", "runs", "methods", "quick", "metrics",
-        "conformance", "condition", "paper", "imu", "site", "template", "run_unclaimed"}
-#: Longitude (deg) and height (m) of a condition when the matrix gives no ``[site]``.
-DEFAULT_LON_DEG, DEFAULT_HEIGHT_M = 108.0, 100.0
-_CONDITION_KEYS = {"name", "base", "lat_deg", "heading_deg", "imu", "vref_sigma_mps", "expect"}
-
-
-@dataclass(frozen=True)
-class Condition:
-    """One condition of the matrix (deg, m/s, m); ``expect`` is "align" or "refuse"; ``imu`` a preset name or the
-    absolute path of an IMU spec file."""
-
-    name: str
-    base: str
-    lat_deg: float
-    heading_deg: float
-    imu: str
-    vref_sigma_mps: float = 0.0
-    expect: str = "align"
-    lon_deg: float = DEFAULT_LON_DEG
-    height_m: float = DEFAULT_HEIGHT_M
-
-    @property
-    def kind(self):
-        return BASES[self.base][0]
-
-
-@dataclass(frozen=True)
-class Matrix:
-    """A validated conformance matrix file."""
-
-    name: str
-    description: str
-    conditions: tuple
-    duration_s: float
-    rate_hz: float
-    runs: int
-    quick_duration_s: float
-    quick_runs: int
-    methods: tuple | None
-    settling_band_arcmin: float
-    level_tolerance_arcmin: float
-    efficiency_max: dict
-    source: str = ""
-    paper: dict = field(default_factory=dict)
-    experiment: str = "conformance"
-    kind: str = "conformance"
-    template: bool = False
-    run_unclaimed: bool = False
-
-    def sized(self, quick):
-        """(duration_s, runs) for a full or a quick run."""
-        return (self.quick_duration_s, self.quick_runs) if quick else (self.duration_s, self.runs)
-
-    def threshold(self, method):
-        """The efficiency a method must reach: its entry of ``[conformance.efficiency]``, else ``default``."""
-        return float(self.efficiency_max.get(method, self.efficiency_max["default"]))
-
-
-def parse(data, src="<conformance>"):
-    """Validate a conformance matrix mapping (as read from TOML); errors name the file and the field."""
-    bad = sorted(set(data) - _TOP)
-    if bad:
-        raise fields.FieldError(f"{fields.where(src, bad[0])}: unknown (expected one of {sorted(_TOP)})")
-    name = fields.string(data, "name", src)
-    if data.get("kind", "conformance") != "conformance":
-        raise fields.FieldError(f"{fields.where(src, 'kind')}: expected 'conformance' for a conformance matrix, "
-                                f"found {data['kind']!r}")
-    duration = fields.number(data, "duration_s", src, lo=10.0, hi=86400.0)
-    rate = fields.number(data, "rate_hz", src, lo=1.0, hi=10000.0)
-    runs = int(fields.number(data, "runs", src, 20.0, lo=1, hi=100000))
-    quick = fields.table(data, "quick", src, {"duration_s", "runs"})
-    methods = data.get("methods")
-    if methods is not None and (not isinstance(methods, list) or not methods
-                                or not all(isinstance(m, str) and m for m in methods)):
-        raise fields.FieldError(f"{fields.where(src, 'methods')}: expected a non-empty list of method names (absent: "
-                                f"every registered aligner), found {methods!r}")
-    met = fields.table(data, "metrics", src, {"settling_band_arcmin"})
-    conf = fields.table(data, "conformance", src, {"level_tolerance_arcmin", "efficiency"})
-    eff = conf.get("efficiency", {})
-    if not isinstance(eff, dict) or "default" not in eff:
-        raise fields.FieldError(f"{fields.where(src, 'conformance.efficiency')}: expected a table with 'default' and "
-                                f"per-method thresholds, found {eff!r}")
-    eff = {k: fields.number(eff, k, src, lo=1.0, hi=1e6, label=f"conformance.efficiency.{k}") for k in eff}
-    sensor = data.get("imu")
-    if sensor is not None:
-        spec = imu.spec_field(sensor, src)  # checked here, once
-        sensor = sensor if sensor in imu.PRESETS else str(imu.near(sensor, src).resolve())
-    site = fields.table(data, "site", src, {"lat_deg", "lon_deg", "height_m"})
-    site_lat = fields.number(site, "lat_deg", src, lo=-89.0, hi=89.0, label="site.lat_deg") if "lat_deg" in site else None
-    template, unclaimed = data.get("template", False), data.get("run_unclaimed", False)
-    for key, value in (("template", template), ("run_unclaimed", unclaimed)):
-        if not isinstance(value, bool):
-            raise fields.FieldError(f"{fields.where(src, key)}: expected true or false, found {value!r}")
-    items = data.get("condition")
-    if not isinstance(items, list) or not items:
-        raise fields.FieldError(f"{fields.where(src, 'condition')}: expected [[condition]] tables, found {items!r}")
-    conds, seen = [], set()
-    for i, c in enumerate(items):
-        label = f"condition[{i}]"
-        if not isinstance(c, dict):
-            raise fields.FieldError(f"{fields.where(src, label)}: expected a table, found {c!r}")
-        extra = sorted(set(c) - _CONDITION_KEYS)
-        if extra:
-            raise fields.FieldError(f"{fields.where(src, label + '.' + extra[0])}: unknown (expected one of "
-                                    f"{sorted(_CONDITION_KEYS)})")
-        cname = fields.string(c, "name", src, label=f"{label}.name")
-        if cname in seen:
-            raise fields.FieldError(f"{fields.where(src, label + '.name')}: expected a unique name, found {cname!r} again")
-        seen.add(cname)
-        lat = fields.number(c, "lat_deg", src, site_lat, lo=-89.0, hi=89.0, label=f"{label}.lat_deg")
-        cimu = fields.string(c, "imu", src, sensor, choices=None if sensor else imu.PRESETS, label=f"{label}.imu")
-        if cimu != sensor and cimu not in imu.PRESETS:
-            raise fields.FieldError(f"{fields.where(src, label + '.imu')}: expected one of {sorted(imu.PRESETS)} (or "
-                                    f"the matrix's own imu), found {cimu!r}")
-        expect = fields.string(c, "expect", src, "align", choices=("align", "refuse", "auto"), label=f"{label}.expect")
-        if expect == "auto":  # refuse where the gyro bias hides the earth rate (every aligner given the model does)
-            ratio = azimuth_bias_ratio(spec if cimu == sensor else imu.PRESETS[cimu], np.radians(lat))
-            expect = "refuse" if ratio > claims.MAX_BIAS_TO_EARTH_RATE else "align"
-        conds.append(Condition(
-            cname, fields.string(c, "base", src, choices=BASES, label=f"{label}.base"), lat,
-            fields.number(c, "heading_deg", src, lo=-360.0, hi=360.0, label=f"{label}.heading_deg"), cimu,
-            fields.number(c, "vref_sigma_mps", src, 0.0, lo=0.0, hi=10.0, label=f"{label}.vref_sigma_mps"), expect,
-            fields.number(site, "lon_deg", src, DEFAULT_LON_DEG, lo=-360.0, hi=360.0, label="site.lon_deg"),
-            fields.number(site, "height_m", src, DEFAULT_HEIGHT_M, lo=-1e4, hi=1e5, label="site.height_m")))
-    return Matrix(name, str(data.get("description", "")), tuple(conds), duration, rate, runs,
-                  fields.number(quick, "duration_s", src, duration, lo=10.0, hi=duration, label="quick.duration_s"),
-                  int(fields.number(quick, "runs", src, float(min(runs, 3)), lo=1, hi=runs, label="quick.runs")),
-                  None if methods is None else tuple(methods),
-                  fields.number(met, "settling_band_arcmin", src, 30.0, lo=1e-3, hi=1e4, label="metrics.settling_band_arcmin"),
-                  fields.number(conf, "level_tolerance_arcmin", src, 0.5, lo=0.0, hi=1e4,
-                                label="conformance.level_tolerance_arcmin"),
-                  eff, src, dict(data.get("paper", {})), template=template,
-                  run_unclaimed=unclaimed)
 
 
 def aligner_names():
     """Every registered aligner (navigators that need an initial attitude left out). A method that claims no
     condition still meets the MEMS condition, where every aligner must refuse."""
     return [name for name, ep in sorted(available_methods().items()) if not supports(ep.load()).needs_init]
-
-
-def condition_scenario(matrix, cond, quick=False, band_arcmin=None):
-    """The alignment scenario (:class:`fusionbench.scenarios.Scenario`) of one condition."""
-    from . import scenarios
-
-    duration, runs = matrix.sized(quick)
-    _, amp, freq = BASES[cond.base]
-    d = {"name": f"{matrix.name}.{cond.name}",
-         "description": f"conformance condition {cond.name}: {cond.base} base, {cond.lat_deg:g} deg latitude, heading "
-                        f"{cond.heading_deg:g} deg, {Path(cond.imu).stem} IMU, reference noise {cond.vref_sigma_mps:g} m/s",
-         "duration_s": duration, "rate_hz": matrix.rate_hz, "runs": runs, "quick": {"duration_s": duration, "runs": runs},
-         "site": {"lat_deg": cond.lat_deg, "lon_deg": cond.lon_deg, "height_m": cond.height_m},
-         "attitude": {"pitch_deg": TILT_DEG[0], "roll_deg": TILT_DEG[1], "heading_deg": cond.heading_deg,
-                      "sway_amplitude_deg": list(amp), "sway_frequency_hz": list(freq)},
-         "imu": cond.imu,
-         "vref": {"sigma_mps": [cond.vref_sigma_mps] * 3},
-         "metrics": {"settling_band_arcmin": matrix.settling_band_arcmin if band_arcmin is None else band_arcmin}}
-    if cond.kind == "moving":
-        h = np.radians(cond.heading_deg)
-        d["motion"] = {"segments": [{"accel_mps2": [MOVING_ACCEL * np.sin(h), MOVING_ACCEL * np.cos(h), 0.0],
-                                     "duration_s": duration}]}
-    return scenarios.parse(d, f"{matrix.source} condition '{cond.name}'")
-
-
-def condition_bound(scn, cond, duration):
-    """Attainable bound (3,) rad of a condition at the end of its record (:func:`metrics.attainable_bound`)."""
-    traj = scn.trajectory(duration)
-    _, sigma = metrics.attainable_bound(scn.imu_spec, duration, trajectory=traj, vref_sigma=cond.vref_sigma_mps,
-                                        vref_dt=scn.dt)
-    return sigma[-1]
 
 
 @dataclass
@@ -259,12 +81,19 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         band = max(matrix.settling_band_arcmin, 3.0 * bound[2] / units.ARCMIN)
         scn = condition_scenario(matrix, cond, quick, band_arcmin=band)
         ratio = azimuth_bias_ratio(scn.imu_spec, np.radians(cond.lat_deg))
-        covered = {n for n in names if cond.expect == "refuse" or claims[n].covers(cond.kind, cond.lat_deg, ratio)}
+        claim = cond.aiding_claim(matrix.rate_hz)
+        covered = {n for n in names
+                   if cond.expect == "refuse" or claims[n].covers(cond.kind, cond.lat_deg, ratio, **claim)}
         claimed = list(names) if matrix.run_unclaimed else [n for n in names if n in covered]
         conditions[cond.name] = {"base": cond.base, "lat_deg": cond.lat_deg, "heading_deg": cond.heading_deg,
                                  "imu": scn.imu_spec.name, "vref_sigma_mps": cond.vref_sigma_mps, "expect": cond.expect,
                                  "gyro_bias_ratio": float(ratio),
                                  "bound_arcmin": _axes(bound / units.ARCMIN), "settling_band_arcmin": band}
+        if cond.receiver:
+            conditions[cond.name]["aiding"] = {"kinds": cond.aiding, "rate_hz": claim["aiding_hz"],
+                                               "position_sigma_m": cond.position_sigma_m,
+                                               "lever_arm_m": list(cond.lever_arm_m), "delay_s": cond.delay_s,
+                                               "outage_s": cond.outage_s}
         for n in names:
             if n not in claimed:
                 cells[n][cond.name] = {"status": "not claimed"}

@@ -127,14 +127,20 @@ def drive(lat, lon=0.0, h=0.0, legs=(), heading=0.0, speed=0.0, start=0.0, pitch
     return Trajectory(lat, lon, h, attitude=d, translation=d, duration=duration)
 
 
-def car_drive(lat, lon=0.0, h=0.0, heading=0.0, wait=0.0, duration=300.0, pitch=0.0, roll=0.0):
-    """A car's drive with turns (the conformance matrix's and the tests'): after ``wait`` s at rest it accelerates at
-    0.5 m/s^2 to 10 m/s, then alternates straight stretches and 40-deg turns left and right, slowing to 6 m/s for
-    each turn and back to 10 m/s after it, until ``duration`` s. Every leg is a whole number of 0.1 s."""
+def car_legs(duration):
+    """The legs of a car's drive with turns lasting at least ``duration`` s (:func:`car_drive`): from rest it
+    accelerates at 0.5 m/s^2 to 10 m/s, then alternates straight stretches and 40-deg turns right and left (5 deg/s
+    for 8 s), slowing to 6 m/s for each turn and back to 10 m/s after it. Every leg is a whole number of 0.1 s."""
     deg = np.pi / 180.0
     legs = [Leg(20.0, 0.5)]
     sign = 1.0
-    while sum(leg.duration for leg in legs) < duration - wait:
+    while sum(leg.duration for leg in legs) < duration:
         legs += [Leg(10.0), Leg(4.0, -1.0), Leg(8.0, 0.0, sign * 5.0 * deg), Leg(4.0, 1.0), Leg(6.0)]
         sign = -sign
-    return drive(lat, lon, h, legs, heading, 0.0, wait, pitch, roll, duration)
+    return legs
+
+
+def car_drive(lat, lon=0.0, h=0.0, heading=0.0, wait=0.0, duration=300.0, pitch=0.0, roll=0.0):
+    """A car's drive with turns (the conformance matrix's and the tests'): at rest for ``wait`` s, then the legs of
+    :func:`car_legs` until ``duration`` s; the site (rad, m) and heading, pitch, roll (rad) as :func:`drive`."""
+    return drive(lat, lon, h, car_legs(duration - wait), heading, 0.0, wait, pitch, roll, duration)

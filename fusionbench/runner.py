@@ -19,6 +19,7 @@ from joblib import Parallel, delayed
 from . import imu as imu_mod
 from . import earth, metrics, streaming, units
 from .aiding import Aiding
+from .aidingsim import simulate_aiding
 from .aligner import call_align, check_time_rule
 from .imudata import IMUData
 from .imufiles import atomic_open
@@ -106,7 +107,9 @@ def _simulate_batch(scn, first_run, runs, seed, duration):
     data = imu_mod.simulate(traj, scn.imu_spec, scn.dt, runs=runs, seed=seed, first_run=first_run)
     t_inc, _, _ = data.increments()
     aiding = None  # a fixed base without a reference's noise: the zero-velocity assumption, as a user's align makes it
-    if streaming.needs_vref(scn, traj):
+    if scn.aiding_spec is not None:  # a receiver at its own rate, lever arm, latency and outages
+        aiding = simulate_aiding(traj, scn.aiding_spec, duration, runs, seed, first_run, grid=t_inc)
+    elif streaming.needs_vref(scn, traj):
         vref = imu_mod.simulate_vref(traj, scn.vref_spec, t_inc, runs=runs, seed=seed, first_run=first_run)
         aiding = Aiding.from_vref(t_inc, vref, at_rest=traj.translation.is_static(), source="the scenario's reference")
     return traj, data, aiding, scn.initial_guess(traj.truth([data.t0]).C_bn[0])

@@ -36,6 +36,24 @@ CASES = [  # (what is appended or replaced, the field the message names, words i
     (("methods = [\"coarse\"]", "methods = []"), "methods", "non-empty list"),
     (("methods = [\"coarse\"]", "methods = [\"\"]"), "methods", "non-empty list"),
     ("experiment = \"nope\"", "experiment", "expected one of"),
+    # a receiver and a drive (docs/scenarios.md [aiding], [motion] legs)
+    ("[vref]\nsigma_mps = 0.1\n[aiding]\nrate_hz = 10.0\nvelocity_sigma_mps = 0.1", "aiding", "found both"),
+    ("[aiding]\nrate_hz = 10.0", "aiding", "found neither"),
+    ("[aiding]\nvelocity_sigma_mps = 0.1", "aiding.rate_hz", "is missing"),
+    ("[aiding]\nrate_hz = 10.0\nvelocity_sigma_mps = 0.1\nlever_arm_m = [0.1, 0.2]", "aiding.lever_arm_m",
+     "expected 3 numbers"),
+    ("[aiding]\nrate_hz = 10.0\nvelocity_sigma_mps = 0.1\noutages = [{start_s = 20.0, end_s = 10.0}]",
+     "aiding.outages[0].end_s", "in [20, inf]"),
+    ("[aiding]\nrate_hz = 10.0\nvelocity_sigma_mps = 0.1\nschedule = [{start_s = 40, end_s = 50, factor = 3}]",
+     "aiding.schedule[0].start_s", "inside the record"),
+    ("[motion]\nspeed_mps = 5.0", "motion.speed_mps", "only with legs"),
+    ("[motion]\nlegs = [{duration_s = 10.01}]", "motion.legs[0].duration_s", "whole samples"),
+    ("[motion]\nlegs = [{duration_s = 10.0, accel_mps2 = -1.0}]", "motion.legs[0].accel_mps2", "stays positive"),
+    ("[motion]\nlegs = [{duration_s = 10.0, turn_rate_dps = 100.0}]", "turn_rate_dps", "in [-90, 90]"),
+    ("[motion]\nlegs = [{duration_s = 10.0}]\ndisturbance_rms_mps = 0.05", "motion.disturbance_rms_mps",
+     "found both"),
+    ("[attitude]\nsway_amplitude_deg = [1.0, 1.0, 1.0]\nsway_frequency_hz = [0.1, 0.1, 0.1]\n[motion]\n"
+     "legs = [{duration_s = 10.0}]", "motion.legs", "a drive and a sway"),
 ]
 
 

@@ -25,14 +25,16 @@ from baselines.rolling import experiment as rolling_experiment
 from baselines.rolling import model as rolling_model
 from baselines.rolling import scheme as rolling_scheme
 from baselines.rolling import spec as rolling_spec
-from fusionbench import aligner, conformance, imu, scenarios, units
+from fusionbench import aligner, conformance_file, imu, scenarios, units
 from fusionbench.experiment import available_experiments, load_experiment
+from fusionbench.scenarios import tables as scenario_tables
 from fusionbench.features import compare as feat_compare, jump as feat_jump, paper as feat_paper, windows as feat_windows
 
 ROOT = Path(__file__).parents[1]
 DOC_PATH = ROOT / "docs" / "scenarios.md"
 DOC = DOC_PATH.read_text()
-PARSERS = (scenarios, imu, conformance, rolling_spec, feat_jump, feat_windows, feat_compare, feat_paper)
+PARSERS = (scenarios, scenario_tables, imu, conformance_file, rolling_spec, feat_jump, feat_windows, feat_compare,
+           feat_paper)
 
 
 # ----------------------------------------------------------------------------------------------- the page, read
@@ -100,7 +102,7 @@ def parser_keys():
     """Every key a parser accepts: the key-set constants, plus every set of strings written in a parser's source
     (the inline key sets: a segment's, a schedule's, a scheme segment's, the conformance sub-tables')."""
     keys = (set(scenarios._TOP) | set().union(*scenarios.sections().values()) | set(imu.SPEC_KEYS)
-            | set(conformance._TOP) | set(conformance._CONDITION_KEYS) | set(rolling_spec.PLATFORM_KEYS)
+            | set(conformance_file._TOP) | set(conformance_file._CONDITION_KEYS) | set(rolling_spec.PLATFORM_KEYS)
             | set(rolling_spec.GROUP_KEYS) | set(rolling_experiment.PlatformRolling.tables) | {"method"})  # a [variants.NAME] table's own key (the rest are options)
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
@@ -111,7 +113,7 @@ def parser_keys():
 
 def parser_values():
     """The names a parser accepts as values: kinds, experiments, presets, bases, axes, and inline ``choices``."""
-    values = (set(scenarios.KINDS) | set(available_experiments()) | set(imu.PRESETS) | set(conformance.BASES)
+    values = (set(scenarios.KINDS) | set(available_experiments()) | set(imu.PRESETS) | set(conformance_file.BASES)
               | set(rolling_scheme.AXES) | set(imu._SENSORS))
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
@@ -180,6 +182,9 @@ PROBED = {
     "`[attitude]`": (SCENARIO, ("attitude",), {}),
     "`[motion]`": (SCENARIO, ("motion",), {"disturbance_rms_mps": 0.01}),  # band and seed are read with it
     "Segments": (SCENARIO, ("motion", "segments", 0), {"accel_mps2": [0.1, 0.0, 0.0], "duration_s": 10.0}),
+    "A drive": (SCENARIO, ("motion",), {"legs": [{"duration_s": 10.0}]}),
+    "Legs": (SCENARIO, ("motion", "legs", 0), {"duration_s": 10.0}),
+    "`[aiding]`": (SCENARIO, ("aiding",), {"rate_hz": 10.0, "velocity_sigma_mps": 0.05}),
     "`[imu]`": (SCENARIO, ("imu",), {}),
     "Overrides in datasheet units": (SCENARIO, ("imu",), {}),
     "Noise schedules": (SCENARIO, ("imu", "schedule", 0), {"start_s": 1.0, "end_s": 2.0, "factor": 1.0}),
@@ -195,6 +200,7 @@ PROBED = {
     "Conformance `[metrics]`": (MATRIX, ("metrics",), {}),
     "`[conformance]`": (MATRIX, ("conformance",), {}),
     "`[[condition]]`": (MATRIX, ("condition", 0), MATRIX["condition"][0]),
+    "The aiding of a moving condition": (MATRIX, ("condition", 0), {**MATRIX["condition"][0], "base": "drive"}),
 }
 _NUM = r"-?\d+(?:\.\d+)?(?:e[+-]?\d+)?"
 

@@ -4,7 +4,8 @@ Built-in scenarios ship in this folder (``*.toml``); a user's scenario is any TO
 same form. Every file is validated on load; an error names the file and the field.
 
 The format, every key with its type, unit, default and allowed range (``[quick]``, ``[site]``, ``[attitude]``,
-``[motion]``, ``[imu]`` with its presets, datasheet-unit overrides and noise schedules, ``[vref]``, ``[init]``,
+``[motion]`` (segments, a disturbance, or a drive's legs), ``[imu]`` with its presets, datasheet-unit overrides and
+noise schedules, ``[vref]`` or ``[aiding]`` (a receiver: :mod:`fusionbench.scenarios.tables`), ``[init]``,
 ``[metrics]``, ``[variants.NAME]``, ``[paper]``, the tables an experiment adds and the conformance-matrix file), is
 docs/scenarios.md; tests/test_docs.py keeps it in step with :func:`parse`. In short: angles in degrees, times in
 s, sensor figures in the datasheet units named in the key (``gyro_bias_dph``, ``arw_dpsh``, ``vrw_ug_rthz``)::
@@ -30,11 +31,14 @@ from pathlib import Path
 import numpy as np
 
 from .. import attitude, features, fields, imu, trajectory
+from ..aidingsim import AidingSpec
 from ..aligner import Site, entry_class
+from ..drive import Drive
 from ..experiment import load_experiment
+from .tables import AIDING_KEYS, MAX_SPEED_MPS, MOTION_KEYS, parse_aiding, parse_motion
 
 _TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
-        "motion", "imu", "vref", "init", "metrics", "variants", "paper", "experiment"}
+        "motion", "imu", "vref", "aiding", "init", "metrics", "variants", "paper", "experiment"}
 #: What a scenario is about, which decides what its figures draw and which figure the overview scores:
 #: ``alignment`` (a stationary or swaying base: the theoretical limits and the settling band apply);
 #: ``moving-alignment`` (a vehicle under way with a velocity reference: the stationary limits do not apply,
@@ -49,9 +53,10 @@ _SECTIONS = {
     "site": {"lat_deg", "lon_deg", "height_m"},
     "attitude": {"pitch_deg", "roll_deg", "heading_deg", "sway_amplitude_deg", "sway_frequency_hz",
                  "sway_phase_deg"},
-    "motion": {"start_s", "segments", "disturbance_rms_mps", "disturbance_band_hz", "disturbance_seed"},
+    "motion": MOTION_KEYS,
     "imu": set(imu.SPEC_KEYS),
     "vref": {"sigma_mps", "schedule"},
+    "aiding": AIDING_KEYS,
     "init": {"misalignment_deg"},
     "metrics": {"settling_band_arcmin", "zoom_from_s"},  # and the keys of the metric features
 }
@@ -88,7 +93,7 @@ class Scenario:
     sway_amplitude: tuple
     sway_frequency: tuple
     sway_phase: tuple
-    translation: trajectory.Translation
+    translation: trajectory.Translation | Drive
     imu_spec: imu.IMUSpec
     vref_spec: imu.VelocityReferenceSpec
     init_misalignment: tuple | None
@@ -101,6 +106,7 @@ class Scenario:
     source: str = ""
     kind: str = "alignment"
     raw: dict = field(default_factory=dict, compare=False, repr=False)
+    aiding_spec: AidingSpec | None = None
 
     @property
     def dt(self) -> float:
@@ -111,10 +117,14 @@ class Scenario:
         return (self.quick_duration_s, self.quick_runs) if quick else (self.duration_s, self.runs)
 
     def trajectory(self, duration=None) -> trajectory.Trajectory:
-        """The true motion (:class:`fusionbench.trajectory.Trajectory`)."""
+        """The true motion (:class:`fusionbench.trajectory.Trajectory`; a drive's legs turn the attitude with the
+        velocity, :class:`fusionbench.drive.Drive`)."""
+        duration = self.duration_s if duration is None else duration
+        if isinstance(self.translation, Drive):
+            return trajectory.Trajectory(self.site.lat, self.site.lon, self.site.h, self.translation,
+                                         self.translation, duration)
         sway = trajectory.EulerSway(self.euler_mean, self.sway_amplitude, self.sway_frequency, self.sway_phase)
-        return trajectory.Trajectory(self.site.lat, self.site.lon, self.site.h, sway, self.translation,
-                                     self.duration_s if duration is None else duration)
+        return trajectory.Trajectory(self.site.lat, self.site.lon, self.site.h, sway, self.translation, duration)
 
     def initial_guess(self, C_bn_true):
         """Initial attitude guess (3, 3) from the prescribed misalignment, or None."""
@@ -144,10 +154,6 @@ class Scenario:
 _where, _num, _vec = fields.where, fields.number, fields.vector
 #: Largest sway amplitude, deg: a ship rolls by tens of degrees at most.
 MAX_SWAY_DEG = 45.0
-#: Largest acceleration of a motion segment per ENU axis, m/s^2 (10 g: beyond any vehicle an alignment runs on).
-MAX_ACCEL_MPS2 = 100.0
-#: Largest velocity-noise figure (reference noise, disturbance RMS), m/s.
-MAX_SPEED_MPS = 100.0
 
 
 def _schedules(items, src, key):
@@ -199,33 +205,19 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
     if min(freq) < 0 or max(freq) > rate / 4:
         raise ScenarioError(f"{_where(src, 'attitude.sway_frequency_hz')}: expected values in [0, rate_hz/4], found {freq}")
     phase = tuple(np.radians(_vec(at, "sway_phase_deg", s, lo=-360.0, hi=360.0)))
-    mo = data.get("motion", {})
-    s = f"{src} [motion]"
-    segs = []
-    if not isinstance(mo.get("segments", []), list):
-        raise ScenarioError(f"{_where(src, 'motion.segments')}: expected a list of tables, found {mo['segments']!r}")
-    for i, it in enumerate(mo.get("segments", [])):
-        if not isinstance(it, dict) or set(it) != {"accel_mps2", "duration_s"}:
-            raise ScenarioError(f"{_where(src, f'motion.segments[{i}]')}: expected accel_mps2 and duration_s, found {it!r}")
-        segs.append(trajectory.Segment(_vec(it, "accel_mps2", s, lo=-MAX_ACCEL_MPS2, hi=MAX_ACCEL_MPS2),
-                                       _num(it, "duration_s", s, lo=0.0)))
-    dist = None
-    if "disturbance_rms_mps" in mo:
-        band = _vec(mo, "disturbance_band_hz", s, (0.1, 2.0), n=2)
-        if not 0 < band[0] < band[1] <= rate / 4:
-            raise ScenarioError(f"{_where(src, 'motion.disturbance_band_hz')}: expected 0 < low < high <= rate_hz/4, found {band}")
-        dist = trajectory.VelocityDisturbance(_vec(mo, "disturbance_rms_mps", s, lo=0.0, hi=MAX_SPEED_MPS), band,
-                                              seed=int(_num(mo, "disturbance_seed", s, 0.0, 0, 2**31)))
-    start = _num(mo, "start_s", s, 0.0, 0.0)
-    if start >= duration and segs:
-        raise ScenarioError(f"{_where(src, 'motion.start_s')}: expected a start inside the record (< duration_s = "
-                            f"{duration:g} s), found {start:g}")
-    translation = trajectory.Translation(segments=tuple(segs), start=start, disturbance=dist)
+    translation = parse_motion(data.get("motion", {}), src, duration, rate, -mean[2], mean[0], mean[1], any(amp))
     spec = _imu_spec(data.get("imu", {}), src)
     vr = data.get("vref", {})
     vspec = imu.VelocityReferenceSpec(_vec(vr, "sigma_mps", f"{src} [vref]", lo=0.0, hi=MAX_SPEED_MPS),
                                       _schedules(vr.get("schedule", []), src, "vref.schedule"))
-    for key, scheds in (("imu.schedule", spec.schedules), ("vref.schedule", vspec.schedules)):
+    aiding = None
+    if "aiding" in data:
+        if "vref" in data:
+            raise ScenarioError(f"{_where(src, 'aiding')}: expected [aiding] or [vref] (the per-increment reference), "
+                                f"found both")
+        aiding = parse_aiding(data["aiding"], src, duration)
+    for key, scheds in (("imu.schedule", spec.schedules), ("vref.schedule", vspec.schedules),
+                        ("aiding.schedule", () if aiding is None else aiding.schedules)):
         for i, sc in enumerate(scheds):
             if sc.start >= duration:
                 raise ScenarioError(f"{_where(src, f'{key}[{i}].start_s')}: expected a window that starts inside the "
@@ -256,10 +248,10 @@ def parse(data: dict, src: str = "<scenario>", tables=None) -> Scenario:
         except ValueError as exc:
             raise ScenarioError(str(exc).splitlines()[0]) from None
     has_rmse_window = "rmse_window_s" in data.get("metrics", {})
-    kind = _kind(data, src, exp.kind, has_rmse_window, bool(segs))
+    kind = _kind(data, src, exp.kind, has_rmse_window, not translation.is_static())
     return Scenario(name, str(data.get("description", "")), duration, rate, runs, tuple(methods), q_dur, q_runs,
                     site, mean, amp, freq, phase, translation, spec, vspec, mis, band, variants, zoom, feats,
-                    experiment, setup, src, kind, data)
+                    experiment, setup, src, kind, data, aiding)
 
 
 def _check_variant_options(exp, vname, opts, src):
