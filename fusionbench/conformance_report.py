@@ -26,6 +26,24 @@ def _cell_text(c):
     return f"{c['efficiency_U']:.2f}{mark}"
 
 
+def _aiding_text(c):
+    """A condition's aiding in a few words: the receiver's (kinds, rate, lever arm, latency, outage), the
+    per-increment reference of a moving base, or "-" on a fixed base."""
+    a = c.get("aiding")
+    if a is None:
+        return "velocity per sample" if c["base"] in ("moving", "drive") else "-"
+    words = [f"{a['kinds']} {a['rate_hz']:g} Hz"]
+    if "position" in a["kinds"]:
+        words.append(f"{a['position_sigma_m']:g} m")
+    if any(a["lever_arm_m"]):
+        words.append(f"lever {np.linalg.norm(a['lever_arm_m']):.1f} m")
+    if a["delay_s"]:
+        words.append(f"{1e3 * a['delay_s']:.0f} ms late")
+    if a["outage_s"]:
+        words.append(f"{a['outage_s']:g}-s outage")
+    return ", ".join(words)
+
+
 def scoreboard_figure(m, path):
     """Conditions (rows) x methods (columns), coloured by efficiency over the method's threshold (log scale:
     green below 1, red above); R: refused, blank: not claimed; each passing cell shows its efficiency.
@@ -82,14 +100,15 @@ def write_report(out, folder):
     for n, b in m["scoreboard"]["methods"].items():
         worst = "-" if b["worst_efficiency"] is None else f"{b['worst_efficiency']:.2f}"
         board.append(f"| `{n}` | {b['passed']} / {b['claimed']} | {worst} | {b['efficiency_max']:g} |")
-    cond_rows = ["| condition | base | latitude (deg) | heading (deg) | IMU | reference noise (m/s) | limit U (arcmin) "
-                 "| bound E / N / U (arcmin) | settling band (arcmin) |", "|---" * 9 + "|"]
+    cond_rows = ["| condition | base | latitude (deg) | heading (deg) | IMU | reference noise (m/s) | aiding | limit U "
+                 "(arcmin) | bound E / N / U (arcmin) | settling band (arcmin) |", "|---" * 10 + "|"]
     for name, c in m["conditions"].items():
         lim = c.get("limit_arcmin", {}).get("U")
         b = c["bound_arcmin"]
         cond_rows.append(f"| {name} | {c['base']} | {c['lat_deg']:g} | {c['heading_deg']:g} | {c['imu']} | "
-                         f"{c['vref_sigma_mps']:g} | {'-' if lim is None else f'{lim:.2f}'} | {b['E']:.3f} / {b['N']:.3f} / "
-                         f"{b['U']:.2f} | {c['settling_band_arcmin']:.1f} |" + (" refuse expected" if c["expect"] == "refuse" else ""))
+                         f"{c['vref_sigma_mps']:g} | {_aiding_text(c)} | {'-' if lim is None else f'{lim:.2f}'} | "
+                         f"{b['E']:.3f} / {b['N']:.3f} / {b['U']:.2f} | {c['settling_band_arcmin']:.1f} |"
+                         + (" refuse expected" if c["expect"] == "refuse" else ""))
     fails = [f"- `{n}` on {c}: {cell.get('message', '')}" + ("" if cell.get("claimed", True) else " (outside its claim)")
              for n in methods for c, cell in m["cells"][n].items() if cell["status"] == "fail"]
     unclaimed_note = (", ° a cell outside the method's claim, run because the file asks for every method everywhere "
