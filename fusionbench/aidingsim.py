@@ -14,7 +14,7 @@ import numpy as np
 
 from . import earth
 from .aiding import Aiding, lever_offset, lever_velocity
-from .imusim import run_seed_sequence
+from .imu import run_seed_sequence
 
 #: Noise streams of a run's SeedSequence (``spawn(9)``): the velocity's is the per-increment reference's.
 _VELOCITY, _POSITION = 7, 8

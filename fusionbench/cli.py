@@ -320,12 +320,13 @@ def _quiet_stdout():
 
 
 def _signed_values(argv):
-    """``--site -41.3,174.8`` as ``--site=-41.3,174.8``: argparse takes a value that starts with '-' and is not one
-    plain number for an option (a southern latitude with a longitude would be refused)."""
+    """``--site -41.3,174.8`` as ``--site=-41.3,174.8`` (and so ``--lever-arm -0.4,1.2,0.9``): argparse takes a
+    value that starts with '-' and is not one plain number for an option (a southern latitude with a longitude, an
+    antenna left of the IMU, would be refused)."""
     out, k = [], 0
     while k < len(argv):
-        if argv[k] == "--site" and k + 1 < len(argv) and argv[k + 1].startswith("-"):
-            out.append(f"--site={argv[k + 1]}")
+        if argv[k] in ("--site", "--lever-arm") and k + 1 < len(argv) and re.match(r"-[\d.]", argv[k + 1]):
+            out.append(f"{argv[k]}={argv[k + 1]}")
             k += 2
         else:
             out.append(argv[k])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from .aligner import entry_class
 
@@ -18,6 +19,17 @@ def integer(expected, ok):
             raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}")
         return value
     return parse
+
+
+def seconds(text):
+    """An argparse type: a finite number (of seconds), else one line saying what was expected."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, found {text!r}")
+    return value
 
 
 def named(spec, call, what="", also=(), group=None):

@@ -1,6 +1,7 @@
 """The commands on a user's recording: ``align``, ``identify`` and ``consistency`` (the contract:
-docs/contract.md), with what they share: the file's format (``--format``) and its site (``--lat``, or a ``.imu``
-header)."""
+docs/contract.md), with what they share: the file's format (``--format``), its site (``--lat``, or a ``.imu``
+header) and, for ``align`` and ``consistency``, a receiver's rows (``--aiding`` and the options that say how to
+read them: :mod:`fusionbench.aidingfiles`, docs/aiding.md)."""
 
 from __future__ import annotations
 
@@ -10,21 +11,25 @@ from pathlib import Path
 import numpy as np
 
 from . import attitude
-from .aligner import GROUP, AlignmentResult, Site, check_time_rule, load_method
-from .cli_common import kind, named
+from .aiding import MAX_DELAY_S, MAX_LEVER_ARM_M
+from .aligner import GROUP, AlignmentResult, Site, call_align, check_time_rule, load_method
+from .cli_common import kind, named, seconds
 from .imu import load_spec
 
-#: How far the mean specific force of a record given to ``align`` may be from the site's gravity (relative): a
-#: moored ship's sway changes it by far less, a unit error (g for m/s^2) or an accelerating vehicle by far more.
+#: How far the mean specific force of a record given to ``align`` may be from the site's gravity (relative): a unit
+#: check. A moored ship's sway changes it by far less, so does a car's drive (its accelerations, brakings and turns
+#: average out: 0.004 % over the tests' 300-s drive); a unit error (g for m/s^2) or dead accelerometers by far more.
 GRAVITY_TOLERANCE = 0.05
 
 
 def add_parsers(sub, debug):
     """The ``align``, ``identify`` and ``consistency`` sub-commands of the parser ``sub``."""
     a = sub.add_parser("align", parents=[debug],
-                       help="align a stationary or swaying IMU recording (CSV, NPZ, PSINS .imu)")
+                       help="align an IMU recording (CSV, NPZ, PSINS .imu): a stationary or swaying base, or a "
+                            "moving one with its receiver's rows (--aiding)")
     a.add_argument("imu_file")
     record_arguments(a)
+    aiding_arguments(a)
     a.add_argument("--method", default="coarse", help="method name (see list; named variants included) or "
                    "module:Class (default coarse)")
     a.add_argument("--imu", help="IMU noise model for methods that use one: a preset name or an IMU spec .toml file "
@@ -43,6 +48,7 @@ def add_parsers(sub, debug):
                             "them (self-consistency, and the methods' agreement)")
     k.add_argument("imu_file")
     record_arguments(k)
+    aiding_arguments(k)
     k.add_argument("--methods", default="coarse,coarse-i0,pid,adrc,kf",
                    help="comma-separated method names (default coarse,coarse-i0,pid,adrc,kf)")
     k.add_argument("--window", type=float, default=300.0, help="window length, s (default 300)")
@@ -60,6 +66,73 @@ def record_arguments(p):
                    "other files)")
     p.add_argument("--lon", type=float, help="longitude, deg (default: the file's header, else 0)")
     p.add_argument("--height", type=float, help="height, m (default: the file's header, else 0)")
+
+
+def aiding_arguments(p):
+    """The options of a command that takes a receiver's rows (docs/aiding.md): the file and how to read it."""
+    from .aidingfiles import FORMATS
+
+    p.add_argument("--aiding", metavar="FILE", help="the velocity and/or position rows of a receiver (GNSS, "
+                   "odometer) beside the IMU, at its own epochs: what a moving base needs (docs/aiding.md)")
+    p.add_argument("--aiding-format", choices=FORMATS, help="the aiding file's format (default csv: t and vE,vN,vU "
+                   "and/or lat,lon,h; kf-gins: KF-GINS's GNSS file; nmea: NMEA 0183 RMC, GGA, VTG, GST)")
+    p.add_argument("--lever-arm", metavar="X,Y,Z", type=lever_arm_text, help="from the IMU to the antenna, m, body "
+                   "right, front, up (default 0,0,0)")
+    p.add_argument("--aiding-delay", metavar="S", type=seconds, help="the receiver's latency, s: a row stamped t is "
+                   "valid at t - S (default 0)")
+    p.add_argument("--aiding-time-offset", metavar="S", type=seconds, help="added to the aiding file's times to put "
+                   "them on the IMU file's clock, s (e.g. NMEA's seconds since 00:00 UTC against the IMU's clock; "
+                   "default 0)")
+
+
+def lever_arm_text(text):
+    """``X,Y,Z`` (m, body right, front, up) as an array: an argparse type."""
+    import argparse
+
+    from .aidingfiles import check_lever_arm
+
+    try:
+        return check_lever_arm([float(x) for x in text.split(",")])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers X,Y,Z in m (body right, front, up), at most "
+                                         f"{MAX_LEVER_ARM_M:g} m long, found {text!r}") from None
+
+
+#: The options that say how to read --aiding, each of which needs it.
+AIDING_OPTIONS = (("--aiding-format", "aiding_format"), ("--lever-arm", "lever_arm"),
+                  ("--aiding-delay", "aiding_delay"), ("--aiding-time-offset", "aiding_time_offset"))
+
+
+def check_aiding_options(args):
+    """Refuse, in one line, an option that says how to read --aiding given without it."""
+    if args.aiding is None:
+        for opt, key in AIDING_OPTIONS:
+            if getattr(args, key) is not None:
+                raise ValueError(f"{opt}: applies to a receiver's rows: give them with --aiding FILE")
+    elif args.aiding_delay is not None and abs(args.aiding_delay) > MAX_DELAY_S:
+        raise ValueError(f"--aiding-delay: expected a receiver's latency within +-{MAX_DELAY_S:g} s, found "
+                         f"{args.aiding_delay:g} s (an offset of the clocks is --aiding-time-offset)")
+
+
+def read_aiding_file(args):
+    """The rows of ``--aiding`` (an :class:`~fusionbench.aiding.Aiding`) read with the options, or None."""
+    check_aiding_options(args)
+    if args.aiding is None:
+        return None
+    from .aidingfiles import read_aiding
+
+    return read_aiding(args.aiding, args.aiding_format or "csv",
+                       lever_arm=np.zeros(3) if args.lever_arm is None else args.lever_arm,
+                       delay=args.aiding_delay or 0.0, time_offset=args.aiding_time_offset or 0.0)
+
+
+def aiding_json(args, aiding):
+    """What ``--json`` and consistency.json say of the rows: :func:`fusionbench.aidingfiles.aiding_summary` with
+    the file's format and the time offset applied."""
+    from .aidingfiles import aiding_summary
+
+    return {**aiding_summary(aiding), "format": args.aiding_format or "csv",
+            "time_offset_s": float(args.aiding_time_offset or 0.0)}
 
 
 def read_record(args, min_samples=2):
@@ -96,18 +169,20 @@ def cmd_align(args):
     noise = None if args.imu is None else load_spec(args.imu)
     method = named(args.method, lambda: load_method(args.method, imu=noise), group=GROUP)
     record_site(args, {})  # what the command line gives is checked before the file is read
+    aiding = read_aiding_file(args)
     imu, meta = read_record(args)
     site = record_site(args, meta)
     if imu.duration < method.min_duration_s:
         raise IMUFileError(f"{args.imu_file}: too short for method {method.name}: {imu.duration:g} s, "
                            f"it needs at least {method.min_duration_s:g} s")
     f_mean = float(np.linalg.norm(imu.mean_rates()[1][0]))
-    if abs(f_mean - site.g) > GRAVITY_TOLERANCE * site.g:  # align takes a stationary or swaying record
-        raise IMUFileError(f"{args.imu_file}: expected a stationary or swaying record, whose mean specific force is "
-                           f"gravity ({site.g:.4f} m/s^2 at the site, within {100 * GRAVITY_TOLERANCE:g} %), found "
-                           f"{f_mean:.4g} m/s^2 (accelerometers in other units, or a moving base?)")
-    res = named(args.method, lambda: method.align(imu, site), "align() ",
-                 also=(getattr(method, "name", ""),))
+    if abs(f_mean - site.g) > GRAVITY_TOLERANCE * site.g:  # a unit check: a vehicle's motion averages out
+        raise IMUFileError(f"{args.imu_file}: expected accelerometers in m/s^2, whose mean specific force over the "
+                           f"record is gravity ({site.g:.4f} m/s^2 at the site, within {100 * GRAVITY_TOLERANCE:g} %), "
+                           f"found {f_mean:.4g} m/s^2 (specific force in g or other units? dead accelerometers? a base "
+                           f"accelerating through the whole record?)")
+    res = named(args.method, lambda: call_align(method, imu, site, aiding=aiding), "align() ",
+                also=(getattr(method, "name", ""),))
     if not isinstance(res, AlignmentResult):
         raise ValueError(f"method {args.method!r}: align() returned {kind(res)}, expected an AlignmentResult")
     check_time_rule(res, imu, args.method)
@@ -115,13 +190,23 @@ def cmd_align(args):
     pitch, roll, yaw = np.degrees(attitude.dcm_to_euler(C))
     out = {"method": method.name, "t_end": res.t_end, "C_bn": C.tolist(), "pitch_deg": float(pitch),
            "roll_deg": float(roll), "yaw_deg": float(yaw), "heading_deg": float(np.degrees(attitude.heading(np.radians(yaw))))}
+    if aiding is not None:
+        out["aiding"] = aiding_json(args, aiding)
     if args.json:
         print(json.dumps(out, allow_nan=False))
     else:
         model = res.imu_model
         print(f"method {out['method']}, t_end {out['t_end']:.3f} s" + (f", noise model {model}" if model else ""))
+        if aiding is not None:
+            print(aiding_line(out["aiding"]))
         print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
     return 0
+
+
+def aiding_line(info):
+    """One line on the rows used (:func:`aiding_json`)."""
+    return (f"aiding {info['file']} ({info['format']}): {info['rows']} rows of {', '.join(info['kinds'])}, lever arm "
+            f"{','.join(f'{x:g}' for x in info['lever_arm_m'])} m, latency {info['delay_s']:g} s")
 
 
 def cmd_identify(args):
@@ -144,14 +229,17 @@ def cmd_consistency(args):
     for spec in methods:  # each one builds, or one line names it, before the record is read
         named(spec, lambda: load_method(spec, imu=None if args.imu is None else load_spec(args.imu)), group=GROUP)
     record_site(args, {})
+    aiding = read_aiding_file(args)
     imu, meta = read_record(args)
     site = record_site(args, meta)
-    res = consistency(imu, site, methods, window_s=args.window, imu_model=args.imu)  # a bar on a terminal
-    paths = write_consistency_report(res, Path(args.out))
+    res = consistency(imu, site, methods, window_s=args.window, imu_model=args.imu,  # a bar on a terminal
+                      aiding=aiding)
+    about = None if aiding is None else aiding_json(args, aiding)
+    paths = write_consistency_report(res, Path(args.out), aiding=about)
     print(f"{args.imu_file}: {imu.duration:.0f} s at {1 / imu.dt:g} Hz, site {np.degrees(site.lat):.4f} deg latitude")
+    if about is not None:
+        print(aiding_line(about))
     for line in summary_lines(res):
         print(line)
     print(f"written: {', '.join(map(str, paths))}")
     return 0
-
-

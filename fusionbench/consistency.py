@@ -21,6 +21,10 @@ what the data allow: two independent windows each at the bound disagree by about
 (:func:`expected_disagreement` adds the carry's own noise). A method within it, and within it of the
 others, does as well as the data allow.
 
+A moving base is checked with its receiver's rows (:class:`fusionbench.aiding.Aiding`): each window gets the rows
+valid in it and starts at their first position (:func:`window_site`). The carry leaves out the transport rate
+``v / R`` (at 10 m/s 2 % of the earth rate: some 1.6 arcmin over a 300-s carry).
+
 Frames: body RFU (x right, y forward, z up), navigation ENU fixed to the earth at the site; attitude
 ``C_bn``; misalignment as :mod:`fusionbench.attitude`. Report and figure: :mod:`fusionbench.consistency_report`.
 """
@@ -32,7 +36,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import attitude, earth, progress as progress_mod
-from .aligner import Site, check_time_rule, load_method
+from .aiding import EDGE_TOLERANCE, Aiding
+from .aligner import Site, call_align, check_time_rule, load_method
 from .imudata import IMUData
 from .strapdown import NavState, Strapdown
 
@@ -77,6 +82,8 @@ class Consistency:
         Attainable bound of one window about the theoretical limit, rad, ENU (:func:`expected_disagreement`).
     expected : ndarray, shape (3,), or None
         Standard deviation of the disagreement of two independent windows at the bound, carry included, rad, ENU.
+    aiding_rows : ndarray of int, shape (K,), or None
+        Rows of the aiding each window was given (valid in it); None without aiding.
     """
 
     window_s: float
@@ -95,6 +102,7 @@ class Consistency:
     imu_model: str | None = None
     bound: np.ndarray | None = None
     expected: np.ndarray | None = None
+    aiding_rows: np.ndarray | None = None
 
     @property
     def windows(self) -> int:
@@ -244,18 +252,26 @@ def expected_disagreement(spec, site: Site, window_duration_s: float, window_s: 
     return bound, np.sqrt(np.diag(cov))
 
 
-def _align_all(imu, site, methods, imu_model, spans, progress):
-    """``C (M, K, 3, 3)`` at each window's end (NaN where refused) and the refusals ``[m][k]``."""
+def _align_all(imu, site, methods, imu_model, spans, progress, aiding=None):
+    """``C (M, K, 3, 3)`` at each window's end (NaN where refused), the refusals ``[m][k]``, the rows each window
+    was given (K,) or None: the aiding valid in ``(t0, t_last]`` of the window."""
     objs = [load_method(name, imu=imu_model) for name in methods]
     C = np.full((len(methods), len(spans), 3, 3), np.nan)
     refused = [[None] * len(spans) for _ in methods]
+    rows = None if aiding is None else np.zeros(len(spans), int)
     bar = progress_mod.bar(progress, len(methods) * len(spans), "consistency")
     try:
         for k, (a, b) in enumerate(spans):
             part = IMUData(imu.t[a:b], imu.gyro[:, a:b], imu.accel[:, a:b], imu.kind)
+            win, where = None, site
+            if aiding is not None:
+                tol = EDGE_TOLERANCE * imu.dt
+                win = aiding.window(part.t0 + tol, part.t_last + tol)
+                rows[k] = 0 if win is None else win.t.size
+                where = site if k == 0 else window_site(site, win)
             for m, (name, method) in enumerate(zip(methods, objs)):
                 try:
-                    res = method.align(part, site)
+                    res = call_align(method, part, where, aiding=win)
                 except ValueError as exc:
                     refused[m][k] = " ".join(str(exc).split()) or type(exc).__name__
                 else:
@@ -264,7 +280,16 @@ def _align_all(imu, site, methods, imu_model, spans, progress):
                 bar.update(1)
     finally:
         bar.close()
-    return C, refused
+    return C, refused, rows
+
+
+def window_site(site: Site, rows) -> Site:
+    """Where a window after the first starts: the first position of its aiding ``rows`` (the antenna's; its height
+    when measured), else ``site``."""
+    if rows is None or not rows.has_position:
+        return site
+    lat, lon, h = rows.position[..., np.flatnonzero(rows.position_rows())[0], :].reshape(-1, 3)[0]
+    return Site(float(lat), float(lon), float(h) if np.isfinite(h) else site.h)
 
 
 def _agreement(C):
@@ -293,7 +318,7 @@ def _agreement(C):
 
 
 def consistency(imu: IMUData, site: Site, methods, window_s: float = 300.0, imu_model=None,
-                progress=None) -> Consistency:
+                progress=None, aiding: Aiding | None = None) -> Consistency:
     """Align consecutive windows of a recording with each method and compare them (module docstring).
 
     Parameters
@@ -313,6 +338,9 @@ def consistency(imu: IMUData, site: Site, methods, window_s: float = 300.0, imu_
         disagreement are computed (:func:`expected_disagreement`).
     progress : None, bool or a bar
         As :func:`fusionbench.progress.bar`, advanced by one per window and method.
+    aiding : fusionbench.aiding.Aiding, optional
+        A receiver's rows for the recording (a moving base), every row valid inside it: each window gets those
+        valid in it (module docstring).
 
     Returns
     -------
@@ -322,8 +350,8 @@ def consistency(imu: IMUData, site: Site, methods, window_s: float = 300.0, imu_
     ------
     ValueError
         One line: not one recording, no method or a repeated one, a window that is not a positive length or
-        leaves fewer than two windows, an unknown method, a method breaking the time rule, or every method
-        refusing every window (their messages).
+        leaves fewer than two windows, aiding rows outside the record, an unknown method, a method breaking the
+        time rule, or every method refusing every window (their messages).
     """
     if not isinstance(imu, IMUData):
         raise ValueError(f"consistency imu: expected an IMUData, found {type(imu).__name__}")
@@ -335,7 +363,11 @@ def consistency(imu: IMUData, site: Site, methods, window_s: float = 300.0, imu_
     if len(set(methods)) != len(methods):
         raise ValueError(f"consistency methods: expected each method once, found {methods}")
     n, spans = window_bounds(imu, window_s)
-    C, refused = _align_all(imu, site, methods, imu_model, spans, progress)
+    if aiding is not None:
+        if not isinstance(aiding, Aiding):
+            raise ValueError(f"consistency aiding: expected a fusionbench.aiding.Aiding, found {type(aiding).__name__}")
+        aiding.check_record(imu.t0, imu.t_last, imu.dt, "consistency")
+    C, refused, aiding_rows = _align_all(imu, site, methods, imu_model, spans, progress, aiding)
     if all(r is not None for rows in refused for r in rows):
         raise ValueError("consistency: every method refused every window: "
                          + "; ".join(dict.fromkeys(r for rows in refused for r in rows)))
@@ -364,4 +396,4 @@ def consistency(imu: IMUData, site: Site, methods, window_s: float = 300.0, imu_
         bound, expected = expected_disagreement(spec, site, float(ends[0] - starts[0]), float(ends[1] - ends[0]),
                                                 C_bn=ref[0] if ref.size else None)
     return Consistency(float(window_s), n, starts, ends, imu.duration, site, methods, C, refused, d, de, agree, pair,
-                       name, bound, expected)
+                       name, bound, expected, aiding_rows)

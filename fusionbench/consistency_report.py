@@ -8,6 +8,8 @@ consistency.json (``allow_nan=False``; undefined figures are null; angles in the
      "t_start_s": [...], "t_end_s": [...],          # each window's initial state and last sample
      "pair_t_end_s": [...],                          # pair k: window k carried to window k+1's end
      "imu_model": "navigation" | null,
+     "aiding": null | {"file", "format", "rows", "kinds", "lever_arm_m", "delay_s", "time_offset_s", "t_first_s",
+                       "t_last_s", "rows_per_window": [...]},   # the receiver's rows (--aiding), each window's
      "bound": null | {"bound_arcmin": {"E", "N", "U"}, "expected_disagreement_arcmin": {"E", "N", "U"}},
      "methods": {name: {
          "windows_aligned": 8, "refused": [{"window": k, "t_end_s": ..., "message": "..."}],
@@ -54,8 +56,9 @@ def _series(a, scale, names=AXES):
     return {n: _list(a[:, i], scale) for i, n in enumerate(names)}
 
 
-def to_json(res: Consistency) -> dict:
-    """The content of consistency.json (module docstring) as plain Python values."""
+def to_json(res: Consistency, aiding=None) -> dict:
+    """The content of consistency.json (module docstring) as plain Python values; ``aiding``: what the command line
+    says of the rows (:func:`fusionbench.cli_record.aiding_json`), to which the rows of each window are added."""
     am = units.ARCMIN
     out = {"kind": "consistency", "window_s": res.window_s, "samples_per_window": res.samples_per_window,
            "windows": res.windows, "record_s": res.record_s,
@@ -63,6 +66,8 @@ def to_json(res: Consistency) -> dict:
                     "height_m": float(res.site.h)},
            "t_start_s": _list(res.t_start), "t_end_s": _list(res.t_end), "pair_t_end_s": _list(res.t_end[1:]),
            "imu_model": res.imu_model,
+           "aiding": None if res.aiding_rows is None else {**(aiding or {}),
+                                                           "rows_per_window": [int(n) for n in res.aiding_rows]},
            "bound": None if res.bound is None else {"bound_arcmin": _axes(res.bound, am),
                                                     "expected_disagreement_arcmin": _axes(res.expected, am)},
            "methods": {}}
@@ -103,6 +108,8 @@ def summary_lines(res: Consistency) -> list:
     used = res.t_end[-1] - res.t_start[0]
     lines = [f"{res.windows} windows of {res.window_s:g} s ({used:g} s of the {res.record_s:g} s record), "
              f"{res.windows - 1} window pairs; window k carried with the gyros to the end of window k+1"]
+    if res.aiding_rows is not None:
+        lines.append(f"aiding rows per window: {', '.join(str(int(n)) for n in res.aiding_rows)}")
     if res.bound is not None:
         lines.append(f"attainable bound of one window (IMU {res.imu_model}): {_triple(res.bound)} arcmin; two "
                      f"windows at it disagree by {_triple(res.expected)} arcmin")
@@ -195,15 +202,15 @@ def plot_consistency(res: Consistency, path):
     figures.save_png(fig, str(path))
 
 
-def write_consistency_report(res: Consistency, out_dir) -> list:
+def write_consistency_report(res: Consistency, out_dir, aiding=None) -> list:
     """Write consistency.png then consistency.json into ``out_dir`` (created if needed), each atomically (a
-    temporary file renamed into place), and return their paths."""
+    temporary file renamed into place), and return their paths; ``aiding`` as :func:`to_json`."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     png = out / "consistency.png"
     plot_consistency(res, png)
     path = out / "consistency.json"
-    text = json.dumps(to_json(res), indent=1, allow_nan=False)
+    text = json.dumps(to_json(res, aiding), indent=1, allow_nan=False)
     with atomic_open(path) as fh:
         fh.write(text + "\n")
     return [path, png]

@@ -56,5 +56,9 @@ UG_PER_SQRT_S = UG
 UG_PER_S = UG
 #: Parts per million, dimensionless.
 PPM = 1e-6
+#: Speed 1 knot (1852 m per hour) in m/s.
+KNOT = 1852.0 / HOUR
+#: Speed 1 km/h in m/s.
+KM_PER_H = 1000.0 / HOUR
 #: Velocity random walk 1 m/s/sqrt(h) in m/s/sqrt(s).
 M_PER_S_SQRT_H = 1.0 / math.sqrt(HOUR)

@@ -162,6 +162,47 @@ def test_bad_jobs_runs_and_seed_are_one_line(capsys, tmp_path, tiny, args, words
     assert not (tmp_path / "o").exists()
 
 
+@pytest.fixture(scope="module")
+def rest_rows(tmp_path_factory):
+    """An aiding CSV of two rows at rest, inside the 60-s ``recording``."""
+    path = tmp_path_factory.mktemp("aiding") / "rest.csv"
+    path.write_text("t,zupt\n10,1\n20,1\n")
+    return path
+
+
+@pytest.mark.parametrize("command", ["align", "consistency"])
+@pytest.mark.parametrize("args,words", [
+    (["--lever-arm", "1,2"], ["--lever-arm", "expected three numbers X,Y,Z in m", "found '1,2'"]),
+    (["--lever-arm", "a,b,c"], ["--lever-arm", "body right, front, up", "found 'a,b,c'"]),
+    (["--lever-arm", "300,0,0"], ["--lever-arm", "at most 200 m long", "found '300,0,0'"]),
+    (["--lever-arm", "-0.5,1,nan"], ["--lever-arm", "found '-0.5,1,nan'"]),
+    (["--aiding-delay", "soon"], ["--aiding-delay", "expected a number of seconds, found 'soon'"]),
+    (["--aiding-delay", "20"], ["--aiding-delay", "latency within +-10 s, found 20 s", "--aiding-time-offset"]),
+    (["--aiding-time-offset", "inf"], ["--aiding-time-offset", "expected a number of seconds, found 'inf'"]),
+    (["--aiding-format", "gpx"], ["--aiding-format", "invalid choice: 'gpx'"]),
+])
+def test_bad_aiding_options_are_one_line_and_write_nothing(capsys, tmp_path, recording, rest_rows, command, args,
+                                                           words):
+    out = tmp_path / "o"
+    status, stdout, err = fb(capsys, command, recording, "--lat", 34, "--aiding", rest_rows, *args,
+                             *(["--out", out] if command == "consistency" else []))
+    assert status == 2 and stdout == ""
+    one_line(err, *words)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["align", "consistency"])
+@pytest.mark.parametrize("option,value", [("--aiding-format", "nmea"), ("--lever-arm", "-0.5,1,0"),
+                                          ("--aiding-delay", "0.1"), ("--aiding-time-offset", "-5")])
+def test_an_aiding_option_without_aiding_is_one_line(capsys, tmp_path, recording, command, option, value):
+    out = tmp_path / "o"
+    status, stdout, err = fb(capsys, command, recording, "--lat", 34, option, value,
+                             *(["--out", out] if command == "consistency" else []))
+    assert status == 2 and stdout == ""
+    one_line(err, f"{option}: ", "give them with --aiding FILE")
+    assert not out.exists()
+
+
 # ---------------------------------------------------------------------------------------- a user's method
 
 
