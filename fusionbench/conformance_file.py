@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import claims, fields, imu, metrics, units
+from . import bound, claims, fields, imu, units
 from .claims import azimuth_bias_ratio
 from .drive import car_legs
 
@@ -248,11 +248,14 @@ def condition_scenario(matrix, cond, quick=False, band_arcmin=None):
 
 
 def condition_bound(scn, cond, duration):
-    """Attainable bound (3,) rad of a condition at the end of its record (:func:`metrics.attainable_bound`)."""
+    """The bound (3,) rad of a condition at the end of its record, ENU: on a fixed base the attainable bound about the
+    theoretical limit (:func:`fusionbench.bound.attainable_bound`); on a moving one the spread of the optimal
+    estimator about the limit it scores against (:func:`fusionbench.bound.bias_limit`, the fixed biases unknown to
+    it), with the condition's aiding as the methods get it."""
     traj = scn.trajectory(duration)
-    rate = cond.aiding_rate_hz or 1.0 / scn.dt
-    _, sigma = metrics.attainable_bound(scn.imu_spec, duration, trajectory=traj, vref_sigma=cond.vref_sigma_mps,
-                                        vref_dt=1.0 / rate)
+    if cond.kind == "moving":
+        return scn.moving_limit(traj).sigma[-1]
+    _, sigma = bound.attainable_bound(scn.imu_spec, duration, trajectory=traj, **scn.reference_model())
     return sigma[-1]
 
 

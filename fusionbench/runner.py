@@ -17,7 +17,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from . import imu as imu_mod
-from . import earth, metrics, streaming, units
+from . import metrics, streaming, units
 from .aiding import Aiding
 from .aidingsim import simulate_aiding
 from .aligner import call_align, check_time_rule
@@ -200,21 +200,17 @@ PREFIX_RUNS = 5
 
 
 def _limits(scn, traj, t, C_bn):
-    """Theoretical limits (M, 3) rad of the scenario's fixed IMU biases at times ``t`` (M,) and true attitudes
-    ``C_bn`` (M, 3, 3); on a moving base with the mean specific force and frame rate of its motion (the limit
-    leans with the specific force: :func:`fusionbench.metrics.theoretical_limits`)."""
+    """The limits (M, 3) rad of the scenario's fixed IMU biases at times ``t`` (M,) and true attitudes ``C_bn``
+    (M, 3, 3): on a fixed base the theoretical limits (:func:`fusionbench.metrics.theoretical_limits`); on a moving
+    one, where an acceleration or a turn makes the biases partly observable, the mean error of the optimal
+    estimator that does not know them (:func:`fusionbench.bound.bias_limit`, with the scenario's aiding)."""
     bg, ba = scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias
     if traj.translation.is_static():
         return metrics.theoretical_limits(bg, ba, C_bn, scn.site.lat, scn.site.h)
+    t_grid, limit, _ = scn.moving_limit(traj)
     t = np.atleast_1d(np.asarray(t, dtype=float))
-    v, _ = traj.translation.mean_velocity(t)
-    a = (v - traj.translation.mean_velocity(t - 1.0)[0]) / 1.0  # over the last second: an acceleration that ends
-    # with the record is still the one the data saw
-    lat, _, h = traj.position(t)
-    w_ie, w_en = earth.earth_rate_n(lat), earth.transport_rate_n(v, lat, h)
-    f_n = a + np.cross(2 * w_ie + w_en, v) - earth.gravity_n(lat, h)
-    return metrics.theoretical_limits(bg, ba, C_bn, lat, h,
-                                      f_n=f_n, w_in=w_ie + w_en)
+    return np.stack([np.interp(t, t_grid, limit[:, i]) for i in range(3)], axis=-1)
+
 
 
 def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end, first_run=0):

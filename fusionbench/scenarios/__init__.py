@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import attitude, features, fields, imu, trajectory
+from .. import attitude, bound, features, fields, imu, trajectory
 from ..aidingsim import AidingSpec
 from ..aligner import Site, entry_class
 from ..drive import Drive
@@ -126,6 +126,25 @@ class Scenario:
         sway = trajectory.EulerSway(self.euler_mean, self.sway_amplitude, self.sway_frequency, self.sway_phase)
         return trajectory.Trajectory(self.site.lat, self.site.lon, self.site.h, sway, self.translation, duration)
 
+    def reference_model(self):
+        """The aiding the methods get, as the bound and the limit model it (:mod:`fusionbench.bound`):
+        ``{"aiding": AidingSpec}`` for a receiver, else the per-increment reference ``{"vref_sigma": m/s, "vref_dt":
+        s}`` (on a fixed base without one, the zero-velocity assumption: an exact zero)."""
+        if self.aiding_spec is not None:
+            return {"aiding": self.aiding_spec}
+        return {"vref_sigma": float(max(self.vref_spec.sigma)), "vref_dt": self.dt}
+
+    def moving_limit(self, traj):
+        """Where the fixed biases put the optimal estimator on this moving scenario's record ``traj``, and its spread
+        about that: :func:`fusionbench.bound.bias_limit` with :meth:`reference_model`, ``(t, limit, sigma)`` (s, rad,
+        rad; ENU), computed once per process for the same scenario and record."""
+        model = self.reference_model()
+        key = (self.name, self.imu_spec, self.site, self.dt, traj.duration, repr(sorted(model.items())))
+        if key not in _MOVING_LIMITS:
+            _MOVING_LIMITS.clear()  # one scenario at a time: the cache holds the last one's only
+            _MOVING_LIMITS[key] = bound.bias_limit(self.imu_spec, traj.duration, trajectory=traj, **model)
+        return _MOVING_LIMITS[key]
+
     def initial_guess(self, C_bn_true):
         """Initial attitude guess (3, 3) from the prescribed misalignment, or None."""
         if self.init_misalignment is None:
@@ -152,6 +171,8 @@ class Scenario:
 
 
 _where, _num, _vec = fields.where, fields.number, fields.vector
+#: :meth:`Scenario.moving_limit`'s cache (one scenario's).
+_MOVING_LIMITS = {}
 #: Largest sway amplitude, deg: a ship rolls by tens of degrees at most.
 MAX_SWAY_DEG = 45.0
 
