@@ -96,6 +96,10 @@ class Supports:
         On a moving base, the slowest rate of aiding rows claimed, Hz.
     max_outage_s : float
         On a moving base, the longest gap in the aiding claimed, s.
+    max_bias_ratio_moving : float, optional
+        On a moving base, the largest gyro bias claimed (as ``max_bias_ratio``); None: ``max_bias_ratio``. A turn
+        makes the gyro bias partly observable, so a method without a bias model may hold on a fixed base what it
+        does not in motion.
     """
 
     bases: tuple = ("static", "sway")
@@ -105,6 +109,7 @@ class Supports:
     aiding: tuple = ("velocity", "position")
     min_aiding_hz: float = 0.0
     max_outage_s: float = float("inf")
+    max_bias_ratio_moving: float | None = None
 
     def __post_init__(self):
         bad = [b for b in self.bases if b not in BASES]
@@ -124,8 +129,9 @@ class Supports:
         """Whether the method claims a condition with this base, at this latitude (deg), with a gyro whose bias is
         ``bias_ratio`` of the horizontal earth rate there (:func:`azimuth_bias_ratio`) and, on a moving base, the
         aiding kinds ``aiding`` (``"velocity"``, ``"position"``) at ``aiding_hz`` with gaps up to ``outage_s`` s."""
-        ok = (base in self.bases and abs(lat_deg) <= self.max_abs_lat_deg + 1e-9
-              and bias_ratio <= self.max_bias_ratio + 1e-12)
+        most = self.max_bias_ratio if base != "moving" or self.max_bias_ratio_moving is None \
+            else self.max_bias_ratio_moving
+        ok = (base in self.bases and abs(lat_deg) <= self.max_abs_lat_deg + 1e-9 and bias_ratio <= most + 1e-12)
         if ok and base == "moving" and aiding:
             ok = (any(k in self.aiding for k in aiding) and aiding_hz >= self.min_aiding_hz - 1e-9
                   and outage_s <= self.max_outage_s + 1e-9)

@@ -2,9 +2,11 @@
 
 :class:`fusionbench.coarse.InertialCoarseAligner` carries, for every run, the body attitude since the start
 ``C`` (the product of the per-sample body rotations, body frame at t0 to body frame now) and the integrated
-specific force ``V`` (m/s, in the body frame at t0) over every sample, and keeps them at a few hundred samples. In
-NumPy that is a Python loop over the samples with a few (R, 3, 3) products each (``engine="numpy"``, the reference);
-here it is one compiled loop over runs and samples, the same arithmetic.
+specific force ``V`` (m/s, in the body frame at t0) over every sample, and keeps ``C`` at a few hundred samples (the
+history) and ``V`` at those and at the samples around each aiding row (and, for rows that give a mean velocity over
+an interval, the integral of ``V``, m). In NumPy that is a Python loop over the
+samples with a few (R, 3, 3) products each (``engine="numpy"``, :func:`body_pass_numpy`, the reference); here it is
+one compiled loop over runs and samples, the same arithmetic.
 """
 
 from __future__ import annotations
@@ -14,8 +16,9 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def body_pass(C_b, dv_b, block, keep, V_blk, C_keep, V_keep):
-    """For each run r and sample k: ``V += C dv_b[r, k]``, ``C = C C_b[r, k]`` from ``C = I``, ``V = 0``.
+def body_pass(C_b, dv_b, dt, ckeep, vkeep, C_out, V_out, P_out):
+    """For each run r and sample k: ``V += C dv_b[r, k]``, ``C = C C_b[r, k]``, ``P += (V_before + V) dt / 2`` from
+    ``C = I``, ``V = 0``, ``P = 0``.
 
     Parameters
     ----------
@@ -23,39 +26,67 @@ def body_pass(C_b, dv_b, block, keep, V_blk, C_keep, V_keep):
         Body rotation over each sample (body frame at its end to body frame at its start).
     dv_b : ndarray, shape (R, N, 3)
         Velocity increment of each sample in the body frame at its start, m/s.
-    block : ndarray of int, shape (N,)
-        Block of each sample (-1: none): ``V`` after the sample is added to ``V_blk[r, block[k]]``.
-    keep : ndarray of int, shape (K,)
-        Increasing sample indices at which ``C`` and ``V`` are stored in ``C_keep[r, j]``, ``V_keep[r, j]``.
-    V_blk : ndarray, shape (R, B, 3)
-        Block sums, added to in place (m/s).
-    C_keep, V_keep : ndarray, shape (R, K, 3, 3) and (R, K, 3)
-        Outputs, written in place.
+    dt : float
+        Sample interval, s.
+    ckeep, vkeep : ndarray of int, shapes (Kc,) and (Kv,)
+        Strictly increasing sample indices after which ``C`` and ``V`` are stored.
+    C_out, V_out : ndarray, shapes (R, Kc, 3, 3) and (R, Kv, 3)
+        Outputs (``C_out[r, j]`` after sample ``ckeep[j]``; ``V_out`` in m/s, body frame at t0), written in place.
+    P_out : ndarray, shape (R, Kv, 3) or (R, 0, 3)
+        The integral of ``V`` (trapezoid rule), m, after the samples ``vkeep`` (none stored when empty).
     """
     R, N = dv_b.shape[0], dv_b.shape[1]
-    K = keep.shape[0]
+    Kc, Kv = ckeep.shape[0], vkeep.shape[0]
+    with_p = P_out.shape[1] > 0
     C = np.empty((3, 3))
     T = np.empty((3, 3))
     V = np.empty(3)
+    P = np.empty(3)
     for r in range(R):
         C[:] = 0.0
         C[0, 0] = C[1, 1] = C[2, 2] = 1.0
         V[:] = 0.0
-        j = 0
+        P[:] = 0.0
+        jc = 0
+        jv = 0
         for k in range(N):
             d0, d1, d2 = dv_b[r, k, 0], dv_b[r, k, 1], dv_b[r, k, 2]
             for i in range(3):
-                V[i] = V[i] + (C[i, 0] * d0 + C[i, 1] * d1 + C[i, 2] * d2)
+                dV = C[i, 0] * d0 + C[i, 1] * d1 + C[i, 2] * d2
+                P[i] = P[i] + (V[i] + 0.5 * dV) * dt
+                V[i] = V[i] + dV
             B = C_b[r, k]
             for i in range(3):
                 for m in range(3):
                     T[i, m] = C[i, 0] * B[0, m] + C[i, 1] * B[1, m] + C[i, 2] * B[2, m]
             C[:] = T
-            b = block[k]
-            if b >= 0:
-                for i in range(3):
-                    V_blk[r, b, i] += V[i]
-            if j < K and keep[j] == k:
-                C_keep[r, j] = C
-                V_keep[r, j] = V
-                j += 1
+            if jc < Kc and ckeep[jc] == k:
+                C_out[r, jc] = C
+                jc += 1
+            if jv < Kv and vkeep[jv] == k:
+                V_out[r, jv] = V
+                if with_p:
+                    P_out[r, jv] = P
+                jv += 1
+
+
+def body_pass_numpy(C_b, dv_b, dt, ckeep, vkeep, C_out, V_out, P_out):
+    """:func:`body_pass` in NumPy, a Python step per sample over all runs at once (the reference)."""
+    R, N = dv_b.shape[:2]
+    C = np.broadcast_to(np.eye(3), (R, 3, 3)).copy()
+    V = np.zeros((R, 3))
+    P = np.zeros((R, 3))
+    jc = jv = 0
+    for k in range(N):
+        dV = (C @ dv_b[:, k, :, None])[..., 0]
+        P = P + (V + 0.5 * dV) * dt
+        V = V + dV
+        C = C @ C_b[:, k]
+        if jc < ckeep.size and ckeep[jc] == k:
+            C_out[:, jc] = C
+            jc += 1
+        if jv < vkeep.size and vkeep[jv] == k:
+            V_out[:, jv] = V
+            if P_out.shape[1]:
+                P_out[:, jv] = P
+            jv += 1

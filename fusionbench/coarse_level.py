@@ -2,9 +2,10 @@
 of each attitude from the specific force of the last seconds, where that is better than the fit's.
 
 Arrays as in the aligner: ``C_bn`` (R, H, 3, 3) the history at the kept indices ``hist`` (H,) of the kept samples
-``keep``; ``t`` (N,) and ``tk`` (K,) s the sample and kept times; ``C_n_i0`` (R, K, 3, 3) navigation to inertial
-frame, ``C_b0_i0`` (R, 3, 3) the frozen body frame to inertial; ``V_keep`` (R, K, 3) m/s the integrated specific
-force in the frozen body frame; ``vref`` (R, N, 3) m/s ENU or None.
+``keep``; ``t`` (N,) s the increment ends and ``tk`` (K,) s the kept times since the initial state; ``C_n_i0``
+(R, K, 3, 3) navigation to inertial frame, ``C_b0_i0`` (R, 3, 3) the frozen body frame to inertial; ``V_keep`` (R, K,
+3) m/s the integrated specific force in the frozen body frame; ``rows`` the aiding's valid times (M,) s and the IMU's
+velocity there (R, M, 3), ENU m/s (the lever velocity taken off), or None.
 """
 
 from __future__ import annotations
@@ -18,20 +19,23 @@ from .attitude import orthonormalize, skew
 SUBWINDOWS = 4
 #: A correction of the level that many times its noise is a real one (the fit's drift), not the base's motion.
 SIGNIFICANT = 3.0
+#: Fewest aiding rows in the window for their slope (and its scatter) to be read; fewer: the fit's level stays.
+MIN_SLOPE_ROWS = 5
 
 
-def relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site, window_s, noise_max):
+def relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, rows, site, window_s, noise_max):
     """Level each attitude of the history on the mean specific force of the ``window_s`` seconds before it.
 
     The fit spreads over the second half of the record, so a gyro bias's drift of the body frame b0 over
     that half tilts the fitted attitude by about half the drift (2.5 arcmin for 1 deg/h over 300 s). The
     specific force of the last seconds, resolved in n with the attitude found, should be the base's
     (gravity, plus the reference's acceleration and Coriolis term on a moving base): a residual
-    ``d = [dE, dN]`` is a tilt ``phiE = dN / g``, ``phiN = -dE / g`` (``f x phi`` with f up; with a reference, its
-    acceleration is the least-squares slope of its samples over the window, so its noise averages out), removed
-    with ``C <- (I + [phi x]) C`` (per recording, unless the reference's slope is too noisy to tell the
-    level to ``noise_max`` rad: then the fit's level stays). The azimuth is kept; on an accelerating base its error couples into
-    the level by f_h / g, as it does for any method.
+    ``d = [dE, dN]`` is a tilt ``phiE = dN / g``, ``phiN = -dE / g`` (``f x phi`` with f up; with aiding, its
+    acceleration is the least-squares slope of the rows valid over the window, so their noise averages out),
+    removed with ``C <- (I + [phi x]) C`` (per recording, unless the rows' slope is too noisy to tell the level to
+    ``noise_max`` rad, or there are fewer than :data:`MIN_SLOPE_ROWS` of them (an outage; a turn's velocity is no
+    straight line either, and its scatter says so): then the fit's level stays). The azimuth is kept; on an
+    accelerating base its error couples into the level by f_h / g, as it does for any method.
     """
     g = site.g
 
@@ -53,7 +57,7 @@ def relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site, window
         expect = np.broadcast_to(-earth.gravity_n(site.lat, site.h), f_n.shape).copy()
         use = np.ones(len(f_n), bool)
         parts = np.linspace(j0, j, SUBWINDOWS + 1).round().astype(int)
-        if vref is None and np.all(np.diff(parts) > 0):
+        if rows is None and np.all(np.diff(parts) > 0):
             # no reference: a base that moves a little (a moored ship's heave and surge) shows as a scatter of
             # the force between sub-windows (the window's mean has it over sqrt(SUBWINDOWS) as its noise); the
             # correction is made where that noise is small or the correction stands out of it (three times:
@@ -62,16 +66,21 @@ def relevel(C_bn, hist, keep, t, tk, C_n_i0, C_b0_i0, V_keep, vref, site, window
             noise = np.std(f_sub[..., :2], axis=0, ddof=1).max(axis=-1) / np.sqrt(SUBWINDOWS)
             shift = np.abs(f_n[:, :2] - expect[:, :2]).max(axis=-1)
             use = (noise / g < noise_max) | (shift > SIGNIFICANT * noise)
-        if vref is not None:  # the reference's acceleration: the least-squares slope of its samples (noise averages)
-            seg = slice(keep[j0], keep[j] + 1)
-            tau = t[seg] - t[seg].mean()
-            v = vref[:, seg]
+        if rows is not None:  # the rows' acceleration: the least-squares slope of their velocities (noise averages)
+            t_rows, v_rows = rows
+            seg = (t_rows >= t[keep[j0]]) & (t_rows <= t[keep[j]])
+            if seg.sum() < MIN_SLOPE_ROWS:
+                continue
+            tau = t_rows[seg] - t_rows[seg].mean()
+            v = v_rows[:, seg]
             v_mean = v.mean(axis=1)
             accel = np.einsum("k,rkc->rc", tau, v - v_mean[:, None]) / np.sum(tau * tau)
-            w_cor = 2 * earth.earth_rate_n(site.lat) + earth.transport_rate_n(v_mean, site.lat, site.h)
-            expect = accel + np.cross(w_cor, v_mean) - earth.gravity_n(site.lat, site.h)
-            # the slope's own noise, from the samples' scatter about it: a noisy or sparse reference would
-            # tilt the level more than the fit does, so those recordings keep the fit's level
+            # the Coriolis term at the window's middle (sparse rows' mean time may be off it by half an interval)
+            v_mid = v_mean + accel * (0.5 * (t[keep[j0]] + t[keep[j]]) - t_rows[seg].mean())
+            w_cor = 2 * earth.earth_rate_n(site.lat) + earth.transport_rate_n(v_mid, site.lat, site.h)
+            expect = accel + np.cross(w_cor, v_mid) - earth.gravity_n(site.lat, site.h)
+            # the slope's own noise, from the rows' scatter about it: noisy or sparse rows would tilt the level
+            # more than the fit does, so those recordings keep the fit's level
             scatter = v[..., :2] - v_mean[:, None, :2] - tau[None, :, None] * accel[:, None, :2]
             slope_sigma = np.sqrt(np.mean(scatter**2, axis=1) / np.sum(tau * tau))
             use = slope_sigma.max(axis=1) / g < noise_max
