@@ -1,9 +1,8 @@
 """Support for the factor-graph aligner (:mod:`baselines.factor_graph`): IMU increments for gtsam,
-keyframe bookkeeping, attitude propagation between keyframes, the reference samples' tiles and the
-velocity factor that compares each sample with the velocity the IMU predicts at its time, the
-posterior covariance from a QR-eliminated Bayes net (``gtsam.Marginals`` factors by Cholesky, which
-fails on these nearly singular graphs), and the residual statistics of variance-component
-estimation.
+keyframe bookkeeping, attitude propagation between keyframes (the rows and their tile factors are
+:mod:`baselines.graph_rows`), the posterior covariance from a QR-eliminated Bayes net
+(``gtsam.Marginals`` factors by Cholesky, which fails on these nearly singular graphs), and the
+residual statistics of variance-component estimation.
 
 Frames: navigation ENU, body RFU; angles rad, rates rad/s, velocities m/s.
 """
@@ -15,7 +14,7 @@ import numpy as np
 import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
-from fusionbench.attitude import orthonormalize, rotvec_to_dcm, skew
+from fusionbench.attitude import orthonormalize, rotvec_to_dcm
 from fusionbench.strapdown import coning_sculling, rodrigues
 
 
@@ -115,178 +114,6 @@ def _propagate(C_known, dR, w_n, T, forward):
         for k in range(K - 1, 0, -1):
             out[k - 1] = E[k - 1].T @ out[k] @ dR[k - 1].T
     return orthonormalize(out)
-
-
-def tiles(t, t_kf):
-    """The keyframe nearest to each sample (its *tile*): the record split at the midpoints between
-    keyframes, so every sample belongs to one keyframe.
-
-    Parameters
-    ----------
-    t : ndarray, shape (M,)
-        Sample times, s.
-    t_kf : ndarray, shape (K,)
-        Keyframe times, s, increasing.
-
-    Returns
-    -------
-    ndarray of int, shape (M,)
-    """
-    return np.searchsorted(0.5 * (t_kf[1:] + t_kf[:-1]), t, side="left")
-
-
-def tile_increments(phi, dv, counts, tile):
-    """Each sample's velocity increment resolved in the body frame of its tile's keyframe.
-
-    Parameters
-    ----------
-    phi, dv : ndarray, shape (M, 3)
-        Rotation vectors (rad) and velocity increments (m/s, body frame at the start of each sample) of
-        the samples (:func:`compensated_increments`).
-    counts : ndarray of int, shape (K,)
-        Keyframe sample counts (:func:`keyframe_counts`).
-    tile : ndarray of int, shape (M,)
-        The keyframe of each sample (:func:`tiles`); a sample of the interval between keyframes k-1 and k
-        belongs to one of them.
-
-    Returns
-    -------
-    u : ndarray, shape (M, 3)
-        ``C_{b_k}^{b_i} dv_i``, m/s, with the gyros' rotation from keyframe k to the start of sample i.
-    R : ndarray, shape (M, 3, 3)
-        ``C_{b_k}^{b_i}``.
-    """
-    M = phi.shape[0]
-    starts, lengths = counts[:-1], np.diff(counts)
-    R_start = np.empty((M, 3, 3))
-    Rcur = np.broadcast_to(np.eye(3), (starts.size, 3, 3)).copy()
-    for s in range(int(lengths.max())):
-        sel = lengths > s
-        idx = starts[sel] + s
-        R_start[idx] = Rcur[sel]
-        Rcur[sel] = Rcur[sel] @ rodrigues(phi[idx])
-    interval = np.searchsorted(counts, np.arange(M), side="right") - 1  # sample i in [counts[j], counts[j+1])
-    later = tile == interval + 1  # belongs to the keyframe at the end of its interval
-    R_start[later] = np.swapaxes(Rcur[interval[later]], -1, -2) @ R_start[later]
-    return np.einsum("mij,mj->mi", R_start, dv), R_start
-
-
-def tile_sums(x, tile, counts):
-    """``x`` summed from each sample's keyframe to the sample: over the samples after the keyframe up to
-    and including sample i, or minus those after sample i up to the keyframe's own sample.
-
-    Parameters
-    ----------
-    x : ndarray, shape (M, ...)
-        Per-sample increments (each tile's in its own frame: only a tile's own samples are summed).
-    tile : ndarray of int, shape (M,)
-    counts : ndarray of int, shape (K,)
-        Keyframe sample counts: keyframe k is at the end of sample ``counts[k] - 1`` (k >= 1), keyframe 0
-        at the start of sample 0.
-
-    Returns
-    -------
-    ndarray, shape (M, ...)
-        Zero at a keyframe's own sample.
-    """
-    S = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])  # S[i + 1]: through sample i
-    return S[1:] - S[counts][tile]
-
-
-def tile_means(tile, K, weight, *arrays):
-    """Weighted means over each tile of ``arrays`` (each (M, ...)), and the variance of such a mean per
-    unit sample variance, ``1 / sum w`` (``1/n``; ``inf`` where a tile is empty).
-
-    Returns ``var`` (K,) and one (K, ...) mean per array (zero where a tile is empty).
-    """
-    w = np.ones(tile.size) if weight is None else np.asarray(weight, dtype=float)
-    s0 = np.bincount(tile, w, minlength=K)
-    some = s0 > 0
-    var = np.full(K, np.inf)
-    var[some] = 1.0 / s0[some]
-    out = [var]
-    for a in arrays:
-        flat = a.reshape(a.shape[0], -1)
-        m = np.zeros((K, flat.shape[1]))
-        for i in range(flat.shape[1]):
-            m[some, i] = np.bincount(tile, w * flat[:, i], minlength=K)[some] / s0[some]
-        out.append(m.reshape((K,) + a.shape[1:]))
-    return out
-
-
-def tile_scatter(r, tile, t, t_kf, weight=None):
-    """Weighted residual sum of squares of ``r`` (M, 3) about a linear fit in time over each tile, summed
-    over the axes, and its degrees of freedom ``3 (n - 2)`` (zero for fewer than three samples): the
-    reference's own scatter about what the solution predicts, a slow drift of the prediction (an
-    attitude error) not counted as noise."""
-    K = t_kf.size
-    w = np.ones(t.size) if weight is None else np.asarray(weight, dtype=float)
-    tau = t - t_kf[tile]
-    n = np.bincount(tile, minlength=K)
-    s0, s1, s2 = (np.bincount(tile, w * tau**p, minlength=K) for p in range(3))
-    y0 = np.stack([np.bincount(tile, w * r[:, i], minlength=K) for i in range(3)], axis=1)
-    y1 = np.stack([np.bincount(tile, w * tau * r[:, i], minlength=K) for i in range(3)], axis=1)
-    det = s0 * s2 - s1**2
-    line = (n >= 3) & (det > 1e-12 * np.maximum(s0 * s2, 1e-300))
-    a, b = np.zeros((K, 3)), np.zeros((K, 3))
-    a[line] = (s2[line, None] * y0[line] - s1[line, None] * y1[line]) / det[line, None]
-    b[line] = (s0[line, None] * y1[line] - s1[line, None] * y0[line]) / det[line, None]
-    res = r - a[tile] - b[tile] * tau[:, None]
-    rss = np.bincount(tile, w * np.sum(res**2, axis=1), minlength=K)
-    rss[~line] = 0.0
-    return rss, np.where(line, 3 * (n - 2), 0)
-
-
-def velocity_error(R, v, b_acc, z, U, Mb):
-    """The velocity factor's error ``v + R (U - Mb b_acc) - z`` (ENU, m/s); arrays broadcast over a
-    leading axis (see :func:`velocity_factor`)."""
-    Ub = U - np.einsum("...ij,...j->...i", Mb, b_acc)
-    return v + np.einsum("...ij,...j->...i", R, Ub) - z
-
-
-def velocity_factor(keys, z, U, Mb, sigma, at):
-    """The velocity factor of one keyframe, ``V + R (U - Mb b_a) = z`` on ``(X, V, B)``, linearised.
-
-    ``z`` (ENU, m/s) is the mean over the keyframe's tile of the reference samples less the part of the
-    velocity change since the keyframe that does not depend on the attitude (gravity, Coriolis); ``U`` the
-    mean of the measured velocity increments from the keyframe to each sample, in the keyframe's body
-    frame (m/s); ``Mb`` (3, 3, s) the mean of the same sums of ``C_{b_k}^{b_j} dt`` (what an accelerometer
-    bias ``b_a`` adds to them); ``R`` the keyframe's attitude ``C_bn``. Each reference sample is so
-    compared with the velocity the IMU predicts at its own time: any motion within the tile is followed,
-    and the attitude and the accelerometer bias enter as they do (the gyro bias's part over half a
-    keyframe interval, ``b_g x f tau^2 / 2``, is neglected: 6e-6 m/s for 1 deg/h over 0.5 s at 1 g).
-
-    The factor is linearised at ``at = (pose, v, b_acc)`` (a ``gtsam.LinearContainerFactor``: all in C++;
-    a Python ``CustomFactor`` made the solve five times slower), with Jacobians ``[-R [(U - Mb b_a) x], 0]``
-    on the pose (gtsam's tangent, rotation then translation, ``R = R_hat Exp(delta)``), ``I`` on V and
-    ``[-R Mb, 0]`` on the bias (gtsam order: accelerometer, gyro). Its error is quadratic in the attitude's
-    move from there (``|U| delta^2 / 2``); the caller relinearises when the attitude moved.
-
-    Parameters
-    ----------
-    keys : (int, int, int)
-        ``X(k)``, ``V(k)``, ``B(j)``.
-    z, U : ndarray, shape (3,)
-    Mb : ndarray, shape (3, 3)
-    sigma : float
-        Noise of ``z``, m/s, each axis.
-    at : (gtsam.Pose3, ndarray, ndarray)
-        Linearisation point: pose, velocity (3,), accelerometer bias (3,).
-    """
-    pose, v, b_acc = at
-    R = pose.rotation().matrix()
-    Ub = U - Mb @ b_acc
-    e0 = v + R @ Ub - z
-    H_x, H_b = np.zeros((3, 6)), np.zeros((3, 6))
-    H_x[:, :3] = -R @ skew(Ub)
-    H_b[:, :3] = -R @ Mb
-    key_x, key_v, key_b = keys
-    jf = gtsam.JacobianFactor(key_x, H_x, key_v, np.eye(3), key_b, H_b, -e0, gtsam.noiseModel.Isotropic.Sigma(3, sigma))
-    lin = gtsam.Values()
-    lin.insert(key_x, pose)
-    lin.insert(key_v, np.asarray(v, dtype=float))
-    lin.insert(key_b, gtsam.imuBias.ConstantBias(np.asarray(b_acc, dtype=float), np.zeros(3)))
-    return gtsam.LinearContainerFactor(jf, lin)
 
 
 _DIMS = {"x": 6, "v": 3, "b": 6}

@@ -11,9 +11,11 @@ from gtsam.symbol_shorthand import B, V, X
 
 from baselines.factor_graph import (AdaptiveFactorGraphAligner, FactorGraphAligner,
                                     noise_model)
-from baselines.graph_support import Posterior, tile_means, tile_sums, tiles, velocity_error, velocity_factor
+from baselines.graph_rows import axis_means, tile_error, tile_factors, tile_sums, tiles
+from baselines.graph_support import Posterior
 from baselines.kalman import KalmanAligner
 from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
+from fusionbench.aidingsim import simulate_aiding
 from fusionbench.aligner import Site
 from fusionbench.imu import (PRESETS, IMUSpec, NoiseSchedule, SensorErrors, VelocityReferenceSpec, simulate,
                             simulate_vref)
@@ -72,48 +74,64 @@ def test_tiles_split_the_samples_between_the_nearest_keyframes_and_their_sums_ru
         c = counts[k] - 1 if k else -1  # the keyframe's own sample (none for the first)
         brute = x[c + 1:i + 1].sum(axis=0) if i > c else -x[i + 1:c + 1].sum(axis=0)
         assert S[i] == pytest.approx(brute, abs=1e-12)
-    w = rng.uniform(0.2, 3.0, 100)
     m = rng.standard_normal((100, 3, 3))
-    var, z, mm = tile_means(tile, t_kf.size, w, x, m)
-    for k in range(t_kf.size):
-        sel = tile == k
-        assert z[k] == pytest.approx(np.average(x[sel], axis=0, weights=w[sel]))
-        assert mm[k] == pytest.approx(np.average(m[sel], axis=0, weights=w[sel]))
-        assert var[k] == pytest.approx(1 / w[sel].sum())
+    w = rng.uniform(0.2, 3.0, 100)
+    # one weight per row on every axis, then a weight per axis (0: the axis not measured in that row)
+    for W in (np.repeat(w[:, None], 3, 1), rng.uniform(0.2, 3.0, (100, 3)) * (rng.uniform(size=(100, 3)) > 0.2)):
+        var, (z, mm) = axis_means(tile, t_kf.size, W, per_axis=[x], shared=[m])
+        for k in range(t_kf.size):
+            sel = tile == k
+            for a in range(3):
+                assert z[k, a] == pytest.approx(np.average(x[sel, a], weights=W[sel, a]))
+                assert mm[k, a] == pytest.approx(np.average(m[sel], axis=0, weights=W[sel, a]))
+                assert var[k, a] == pytest.approx(1 / W[sel, a].sum())
 
 
-def test_the_velocity_factor_is_its_error_linearised_in_gtsams_tangent():
-    keys = (X(3), V(3), B(1))
-    z, U = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.2, -4.0])
-    Mb = np.array([[0.3, 0.01, 0.0], [-0.01, 0.3, 0.02], [0.0, -0.02, 0.29]])
+@pytest.mark.parametrize("position", [False, True])
+def test_the_tile_factor_is_its_error_linearised_in_gtsams_tangent(position):
+    # a velocity factor (V + R (U_a - Mb_a b_a) = z) and a position factor (P + dt V + ...), each ENU axis with its
+    # own means (rows weighted differently per axis), the vertical axis not measured
+    rng = np.random.default_rng(4)
+    keys = [(X(3), V(3), B(1))]
+    d = {"z": np.array([[1.0, -2.0, 0.5]]), "U": rng.standard_normal((1, 3, 3)),
+         "Mb": 0.3 * np.eye(3) + 0.02 * rng.standard_normal((1, 3, 3, 3)),
+         "c_v": np.array([[0.2, -0.1, 0.3]]) if position else np.ones((1, 3)), "position": position}
     pose = gtsam.Pose3(gtsam.Rot3.RzRyRx(0.1, -0.2, 0.7), np.array([5.0, 1.0, 2.0]))
     v = np.array([0.4, 0.1, -0.3])
     bias = gtsam.imuBias.ConstantBias(np.array([0.01, -0.02, 0.03]), np.array([1e-5, 2e-5, -1e-5]))
-    f = velocity_factor(keys, z, U, Mb, 1.0, (pose, v, bias.accelerometer()))
+    sigma = np.array([[0.5, 2.0, np.inf]])
+    [(k, f)] = tile_factors(d, sigma, keys, ([pose], v[None], [bias]))
     values = gtsam.Values()
-    values.insert(keys[0], pose)
-    values.insert(keys[1], v)
-    values.insert(keys[2], bias)
-    R = pose.rotation().matrix()
-    e0 = velocity_error(R, v, bias.accelerometer(), z, U, Mb)
-    assert e0 == pytest.approx(v + R @ (U - Mb @ bias.accelerometer()) - z)
+    values.insert(keys[0][0], pose)
+    values.insert(keys[0][1], v)
+    values.insert(keys[0][2], bias)
+
+    def error(p, vel, b):
+        return tile_error(d, p.rotation().matrix()[None], p.translation()[None], vel[None], b.accelerometer()[None])[0]
+
+    e0 = error(pose, v, bias)
+    R, Ub = pose.rotation().matrix(), d["U"][0] - np.einsum("aij,j->ai", d["Mb"][0], bias.accelerometer())
+    direct = d["c_v"][0] * v + np.array([R[a] @ Ub[a] for a in range(3)]) - d["z"][0]
+    # two orders of the same sums: rounding of a few ulps of the largest term
+    tol = 16 * np.finfo(float).eps * (np.abs(v).max() + np.abs(Ub).sum(axis=1).max() + 5.0)
+    assert e0 == pytest.approx(direct + (pose.translation() if position else 0.0), abs=tol)
     A, b = f.linearize(values).jacobian()
-    assert -b == pytest.approx(e0) and f.error(values) == pytest.approx(0.5 * e0 @ e0)
+    assert k == 0 and A.shape == (2, 15)  # the up axis is not measured: no row
+    assert -b == pytest.approx(e0[:2] / sigma[0, :2], abs=tol / sigma.min())
     num = np.zeros((3, 15))  # the nonlinear error's derivative along gtsam's retractions
     for j in range(15):
-        d = np.zeros(15)
-        d[j] = 1e-6
-        p2, v2, b2 = pose.retract(d[:6]), v + d[6:9], bias.retract(d[9:])
-        num[:, j] = (velocity_error(p2.rotation().matrix(), v2, b2.accelerometer(), z, U, Mb) - e0) / 1e-6
-    assert A == pytest.approx(num, abs=1e-5)
+        dx = np.zeros(15)
+        dx[j] = 1e-6
+        num[:, j] = (error(pose.retract(dx[:6]), v + dx[6:9], bias.retract(dx[9:])) - e0) / 1e-6
+    assert A == pytest.approx(num[:2] / sigma[0, :2, None], abs=1e-5)
     # moved away from the linearisation point, the factor follows the error to first order
-    d = np.r_[1e-3, -2e-3, 1e-3, 0.0, 0.0, 0.0]
     moved = gtsam.Values()
-    moved.insert(keys[0], pose.retract(d))
-    moved.insert(keys[1], v)
-    moved.insert(keys[2], bias)
-    e1 = velocity_error(pose.retract(d).rotation().matrix(), v, bias.accelerometer(), z, U, Mb)
-    assert f.error(moved) == pytest.approx(0.5 * e1 @ e1, rel=1e-4)
+    dx = np.r_[1e-3, -2e-3, 1e-3, 0.1, 0.0, -0.1]
+    moved.insert(keys[0][0], pose.retract(dx))
+    moved.insert(keys[0][1], v)
+    moved.insert(keys[0][2], bias)
+    e1 = error(pose.retract(dx), v, bias)[:2] / sigma[0, :2]
+    assert f.error(moved) == pytest.approx(0.5 * e1 @ e1, rel=1e-3)
 
 
 def test_a_perfect_imu_on_a_wobbling_vehicle_with_a_perfect_reference_is_aligned():
@@ -201,10 +219,10 @@ def moving_base_runs():
     scn = scenarios.get("paper001-moving-base")
     traj = scn.trajectory(300.0)
     data = simulate(traj, scn.imu_spec, scn.dt, runs=12, seed=1)
-    vref = simulate_vref(traj, scn.vref_spec, data.increments()[0], runs=12, seed=1)
+    aid = simulate_aiding(traj, scn.aiding_spec, 300.0, runs=12, seed=1, grid=data.increments()[0])  # 0.1 m/s
     init = scn.initial_guess(traj.truth([0.0]).C_bn[0])
-    kf = KalmanAligner(imu="seed001", vref_sigma=0.1).align(data, scn.site, vref=vref, init=init)
-    fg = FactorGraphAligner(imu=scn.imu_spec, vref_sigma=0.1).align(data, scn.site, vref=vref, init=init)
+    kf = KalmanAligner(imu="seed001", vref_sigma=0.1).align(data, scn.site, aiding=aid, init=init)
+    fg = FactorGraphAligner(imu=scn.imu_spec, vref_sigma=0.1).align(data, scn.site, aiding=aid, init=init)
     C_end = traj.truth([300.0]).C_bn[0]
     err = {name: np.stack([attitude.misalignment(C, C_end) for C in res.C_bn_final]) for name, res in
            (("kf", kf), ("gtsam", fg))}
@@ -259,10 +277,10 @@ def test_the_adaptive_graph_finds_the_reference_variance_jump_of_seed001():
     scn = scenarios.get("paper001-r-jump")
     traj = scn.trajectory()
     data = simulate(traj, scn.imu_spec, scn.dt, runs=1, seed=4)
-    vref = simulate_vref(traj, scn.vref_spec, data.increments()[0], runs=1, seed=4)
+    aid = simulate_aiding(traj, scn.aiding_spec, runs=1, seed=4, grid=data.increments()[0])  # 0.1 m/s, x100 inside
     init = scn.initial_guess(traj.truth([0.0]).C_bn[0])
     fg = AdaptiveFactorGraphAligner(imu=replace(scn.imu_spec, schedules=()), vref_sigma=0.1)
-    res = fg.align(data, scn.site, vref=vref, init=init)
+    res = fg.align(data, scn.site, aiding=aid, init=init)
     t, lam = res.extra["adapt_window_t"], res.extra["reference_variance_scale"][0]
     inside, outside = (t > 210) & (t < 390), (t < 190) | (t > 410)
     # each 10-s window holds about 240 degrees of freedom: the variance to about 10 %
