@@ -337,15 +337,20 @@ def lever_offset(C_bn, lever_arm):
 
 
 def enu_offset(position, origin):
-    """ENU offset (..., 3), m, of ``position`` from ``origin`` (each (..., 3): latitude rad, longitude rad, height m),
-    with the radii of curvature at the origin (exact to second order in the distance over the earth's radius: 1 mm
-    at 3 km)."""
+    """The curvilinear ENU offset (..., 3), m, of ``position`` from ``origin`` (each (..., 3): latitude rad, longitude
+    rad, height m): ``(R_N + h0) cos(L_mid) dlon``, ``(R_M + h0) dL``, ``dh`` with the radii at the origin.
+
+    For differences of metres (a filter's position error, a lever arm) it is the local tangent plane's to the square
+    of the distance over the earth's radius; kilometres away it is a coordinate on the ellipsoid, which differs from
+    the tangent plane at second order (a point 1.6 km due east on the parallel lies d^2 tan L / 2R = 0.2 m north of
+    the tangent plane at 45 deg). NaN heights leave the horizontal offset and make the up offset NaN."""
     position, origin = np.asarray(position, dtype=float), np.asarray(origin, dtype=float)
     lat0, h0 = origin[..., 0], origin[..., 2]
     rm, rn = earth.radii(lat0)
     dlon = np.angle(np.exp(1j * (position[..., 1] - origin[..., 1])))  # across the antimeridian too
     lat_mid = 0.5 * (position[..., 0] + lat0)
-    return np.stack([dlon * (rn + h0) * np.cos(lat_mid), (position[..., 0] - lat0) * (rm + h0),
+    r_h = np.nan_to_num(h0)  # a height not measured: the horizontal offset still is (the up offset is NaN)
+    return np.stack([dlon * (rn + r_h) * np.cos(lat_mid), (position[..., 0] - lat0) * (rm + r_h),
                      position[..., 2] - h0], axis=-1)
 
 
