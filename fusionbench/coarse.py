@@ -179,11 +179,9 @@ class InertialCoarseAligner(AlignerBase):
     engine : {"numba", "numpy"}
         The pass over the samples compiled (:func:`fusionbench.coarse_kernel.body_pass`, default) or in NumPy, a
         Python step per sample (the reference: the same results to rounding, ten to a hundred times slower).
-    motion_mps, motion_mps_per_s2, max_gravity_excess : optional
-        No longer used: the method's own motion checks (their thresholds) gave way to the input policy's
-        (:func:`fusionbench.motion.check_stationary`, with :mod:`fusionbench.motion`'s thresholds, the same for
-        every aligner). Accepted and ignored, so that callers passing them keep working; ``motion_mps=None`` no
-        longer switches a check off (a base that moves needs its aiding).
+
+    The method's own motion checks (``motion_mps``, ``motion_mps_per_s2``, ``max_gravity_excess`` of earlier
+    versions) gave way to the input policy's, the same for every aligner (:func:`fusionbench.motion.check_stationary`).
     """
 
     positive_options = ("history_points", "fit_points")
@@ -200,9 +198,7 @@ class InertialCoarseAligner(AlignerBase):
     max_latitude_deg = 89.0  # as the analytic coarse alignment: no north at the pole
 
     def __init__(self, history_points: int = 100, fit_points: int = 50, caller: str | None = None, imu=None,
-                 level_window_s: float | None = 20.0, level_noise_max: float = 3e-5, engine: str = "numba",
-                 motion_mps: float | None = None, motion_mps_per_s2: float | None = None,
-                 max_gravity_excess: float | None = None):
+                 level_window_s: float | None = 20.0, level_noise_max: float = 3e-5, engine: str = "numba"):
         self.engine = check_engine(self.name, engine)
         self.spec = None if imu is None else load_spec(imu)
         self.level_window_s = None if not level_window_s else float(level_window_s)

@@ -1,0 +1,108 @@
+"""The measurement of an ESO step from its rows, compiled: :meth:`adrc.eso_td_rows.StepRows.measure` for one run,
+operation for operation (the sums of three products in the lever-arm terms excepted: NumPy's einsum orders them
+its own way), for :func:`adrc.moving_base_compiled.eso_td_steps`. Frames and units as there: ENU, body RFU, m/s."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: The kinds of measurement (:data:`adrc.eso_td_rows.POINT`, ``INTERVAL``).
+_POINT = 0
+
+
+def row_arrays(rows):
+    """The arrays of a :class:`adrc.eso_td_rows.StepRows` that :func:`measure` reads, as one tuple."""
+    return (rows.start, rows.kind, rows.k, rows.w, rows.lever, rows.value, rows.mark0, rows.mark1, rows.inv_T,
+            rows.mark_start, rows.mark_k, rows.mark_w, rows.lever_arm, rows.age)
+
+
+@numba.njit(cache=True)
+def _lever_velocity(C, w_ib, w_in, lever_arm, out):
+    """``C (omega_nb^b x l)`` (:func:`fusionbench.aiding.lever_velocity`) into ``out`` (3,), m/s, with
+    ``omega_nb^b = w_ib - C^T w_in`` (rad/s; ``C`` (3, 3) body to ENU, ``w_in`` ENU)."""
+    w0 = w_ib[0] - (C[0, 0] * w_in[0] + C[1, 0] * w_in[1] + C[2, 0] * w_in[2])
+    w1 = w_ib[1] - (C[0, 1] * w_in[0] + C[1, 1] * w_in[1] + C[2, 1] * w_in[2])
+    w2 = w_ib[2] - (C[0, 2] * w_in[0] + C[1, 2] * w_in[1] + C[2, 2] * w_in[2])
+    c0 = w1 * lever_arm[2] - w2 * lever_arm[1]
+    c1 = w2 * lever_arm[0] - w0 * lever_arm[2]
+    c2 = w0 * lever_arm[1] - w1 * lever_arm[0]
+    for i in range(3):
+        out[i] = C[i, 0] * c0 + C[i, 1] * c1 + C[i, 2] * c2
+
+
+@numba.njit(cache=True)
+def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks, w_in, dt, y, Fbar, e_last):
+    """Step ``j``'s measurement for run ``r``; False without rows in the step.
+
+    Parameters
+    ----------
+    rw : tuple
+        :func:`row_arrays`.
+    out_C, out_v : ndarray, shapes (R, m, 3, 3), (R, m, 3)
+        The strapdown's attitude and velocity after each of the step's samples.
+    dth : ndarray, shape (R, m, 3)
+        The step's angle increments, body, rad.
+    cs : ndarray, shape (m + 1, 3)
+        ``int f_n dt`` from the step's start to each sample end (``cs[0]`` = 0), run ``r``, m/s.
+    v_prev, reset_sum, F_int, P, marks, w_in
+        As :meth:`adrc.eso_td_rows.StepRows.measure` (``w_in`` (3,) of run ``r``); ``P`` and ``marks`` written.
+    y, Fbar, e_last : ndarray, shapes (2,), (3,), (2,)
+        Written: the unreset level velocity error, ``int f_n dt`` at the rows' times, the last row's error.
+    """
+    start, kind, kk, ww, lever, value, mark0, mark1, inv_T, mark_start, mark_k, mark_w, lever_arm = rw[:13]
+    m = out_v.shape[1]
+    I0, I1, cum, lv, e, F = np.empty(5), np.empty(5), np.zeros(5), np.empty(3), np.empty(2), np.empty(3)
+    if mark_k.shape[0] > 0:  # the integrals of the unreset velocity and of int f_n dt, at the marks and the end
+        ia, b = mark_start[j], mark_start[j + 1]
+        for k in range(m):
+            for c in range(2):
+                I0[c] = (v_prev[r, c] if k == 0 else out_v[r, k - 1, c]) + reset_sum[r, c]
+                I1[c] = out_v[r, k, c] + reset_sum[r, c]
+            for i in range(3):
+                I0[2 + i], I1[2 + i] = cs[k, i] + F_int[r, i], cs[k + 1, i] + F_int[r, i]
+            while ia < b and mark_k[ia] == k:
+                w = mark_w[ia]
+                for c in range(5):
+                    marks[r, ia, c] = (P[r, c] + cum[c]) + w * dt * ((1.0 - w / 2.0) * I0[c] + w / 2.0 * I1[c])
+                for i in range(3):
+                    marks[r, ia, 5 + i] = (out_C[r, k, i, 0] * lever_arm[0] + out_C[r, k, i, 1] * lever_arm[1]
+                                           + out_C[r, k, i, 2] * lever_arm[2])
+                ia += 1
+            for c in range(5):
+                cum[c] += 0.5 * dt * (I0[c] + I1[c])
+        for c in range(5):
+            P[r, c] = P[r, c] + cum[c]
+    i0, i1 = start[j], start[j + 1]
+    if i1 == i0:
+        return False
+    sy, sF = np.zeros(2), np.zeros(3)
+    for i in range(i0, i1):
+        if kind[i] == _POINT:
+            k, w = kk[i], ww[i]
+            for c in range(2):
+                e[c] = (1.0 - w) * (v_prev[r, c] if k == 0 else out_v[r, k - 1, c]) + w * out_v[r, k, c]
+            if lever[i] == 1:
+                _lever_velocity(out_C[r, k], dth[r, k] / dt, w_in, lever_arm, lv)
+                for c in range(2):
+                    e[c] = e[c] + lv[c]
+            for c in range(2):
+                e[c] = e[c] - value[r, i, c]
+            for c in range(3):
+                F[c] = (1.0 - w) * cs[k, c] + w * cs[k + 1, c]
+        else:  # the mean over a position interval: the integrals' difference over its length
+            a, b = mark0[i], mark1[i]
+            for c in range(2):
+                e[c] = (((marks[r, b, c] - marks[r, a, c]) * inv_T[i] + (marks[r, b, 5 + c] - marks[r, a, 5 + c])
+                         * inv_T[i]) - value[r, i, c]) - reset_sum[r, c]
+            for c in range(3):
+                F[c] = (marks[r, b, 2 + c] - marks[r, a, 2 + c]) * inv_T[i] - F_int[r, c]
+        for c in range(2):
+            sy[c] = e[c] if i == i0 else sy[c] + e[c]
+        for c in range(3):
+            sF[c] = F[c] if i == i0 else sF[c] + F[c]
+    for c in range(2):
+        y[c], e_last[c] = sy[c] / (i1 - i0) + reset_sum[r, c], e[c]
+    for c in range(3):
+        Fbar[c] = F_int[r, c] + sF[c] / (i1 - i0)
+    return True
