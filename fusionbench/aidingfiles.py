@@ -36,7 +36,7 @@ from .aiding import MAX_LEVER_ARM_M, Aiding
 from .imufiles import IMUFileError, _cell, _is_number, _lines
 
 __all__ = ["AidingFileError", "FORMATS", "CSV_COLUMNS", "read_aiding", "read_csv_rows", "read_kf_gins_rows",
-           "text_lines", "aiding_summary", "kinds", "check_lever_arm"]
+           "text_lines", "aiding_summary", "kinds", "check_lever_arm", "write_csv"]
 
 #: The ``--aiding-format`` names.
 FORMATS = ("csv", "kf-gins", "nmea")
@@ -299,6 +299,40 @@ def aiding_summary(aiding: Aiding) -> dict:
     return {"file": aiding.source, "rows": int(aiding.t.size), "kinds": kinds(aiding),
             "lever_arm_m": [float(x) for x in aiding.lever_arm], "delay_s": float(aiding.delay),
             "t_first_s": float(aiding.t[0]), "t_last_s": float(aiding.t[-1])}
+
+
+def write_csv(path, aiding: Aiding, run=0):
+    """Write the rows of recording ``run`` as an aiding CSV (the ``csv`` format), atomically; returns the path.
+
+    Columns: ``t`` (the stamps, s), ``vE,vN,vU`` (m/s) where the rows have a velocity, ``lat,lon,h`` (deg, deg, m)
+    where they have a position, ``sigma_v`` and ``sigma_p`` (the largest axis of each row's sigmas: the format has
+    one per row) where given, ``zupt`` where rows are at rest; NaN is written as an empty field. The lever arm and the
+    latency are not in the file: they are the command line's (``--lever-arm``, ``--aiding-delay``).
+    """
+    from .imufiles import atomic_open
+
+    runs = aiding.runs
+    aid = aiding if runs is None else aiding.select_runs([run])
+    cols, data = ["t"], [aid.t]
+    if aid.velocity is not None:
+        cols += ["vE", "vN", "vU"]
+        data += list(aid.velocity.reshape(-1, aid.t.size, 3)[0].T)
+    if aid.position is not None:
+        p = aid.position.reshape(-1, aid.t.size, 3)[0]
+        cols += ["lat", "lon", "h"]
+        data += [np.degrees(p[:, 0]), np.degrees(p[:, 1]), p[:, 2]]
+    for name, sig in (("sigma_v", aid.sigma_v), ("sigma_p", aid.sigma_p)):
+        if sig is not None:
+            cols.append(name)
+            data.append(sig.max(axis=1))
+    if aid.at_rest is not None:
+        cols.append("zupt")
+        data.append(aid.at_rest.astype(float))
+    lines = [",".join(cols)] + [",".join("" if np.isnan(x) else f"{x:.12g}" for x in row)
+                                for row in np.column_stack(data)]
+    with atomic_open(path) as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path
 
 
 def check_lever_arm(values, what="--lever-arm"):

@@ -254,3 +254,19 @@ def test_nmea_keeps_the_first_sentence_of_a_type_in_an_epoch_skips_a_leading_vtg
     np.testing.assert_array_equal(a.position[:, 2], [100.0, 101.0])
     np.testing.assert_array_equal(a.sigma_p, [[0.6, 0.8, 1.5]] * 2)
     assert a.velocity is None
+
+
+def test_rows_written_as_an_aiding_csv_read_back_the_same(tmp_path):
+    from fusionbench import drive
+    from fusionbench.aidingfiles import write_csv
+    from fusionbench.aidingsim import AidingSpec, simulate_aiding
+
+    car = drive.car_drive(np.radians(45.0), heading=0.5, duration=60.0, wait=0.05)
+    rows = simulate_aiding(car, AidingSpec(1.0, (0.05,) * 3, (0.5,) * 3, lever_arm=(0.5, 1.2, 0.74), delay=0.05),
+                           runs=2, seed=1)
+    path = write_csv(tmp_path / "gnss.csv", rows, run=1)
+    back = read_aiding(path, lever_arm=rows.lever_arm, delay=0.05)
+    # 12 significant digits: 1e-10 deg of latitude (1e-5 m), 1e-12 m/s
+    assert np.allclose(back.velocity, rows.velocity[1], atol=1e-10)
+    assert np.allclose(back.position[:, :2], rows.position[1, :, :2], atol=1e-11)
+    assert np.array_equal(back.t, rows.t) and np.allclose(back.sigma_p, 0.5)
