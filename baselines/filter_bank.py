@@ -10,7 +10,9 @@ x = x + K y, P = (I - K H) P (I - K H)^T + K R K^T, the Joseph form):
 ``"filterpy"``
     one filterpy ``KalmanFilter`` per run, the reference the tests compare the first with.
 
-Arrays: ``x`` (R, n), ``P`` (R, n, n), ``R`` (R, m, m); ``F``, ``Q`` given per step as (R, n, n).
+Arrays: ``x`` (R, n), ``P`` (R, n, n), ``R`` (R, m, m); ``F``, ``Q`` given per step as (R, n, n). An update may bring
+its own ``H`` (q, n) or (R, q, n) and ``R`` (q, q) or (R, q, q), of any dimension q: measurements whose number
+and model change from step to step (aiding rows at their own epochs), as filterpy's ``update(z, R, H)`` takes them.
 """
 
 from __future__ import annotations
@@ -30,34 +32,37 @@ class FilterBank:
         Number of filters R.
     P0 : ndarray, shape (n,) or (n, n)
         Initial covariance (a diagonal as a vector), the same for every run.
-    H : ndarray, shape (m, n)
-        Measurement matrix, the same for every run.
-    R : ndarray, shape (m, m)
-        Initial measurement noise covariance, the same for every run (per-run values via :attr:`R`).
+    H : ndarray, shape (m, n), optional
+        Measurement matrix, the same for every run (None: every update brings its own).
+    R : ndarray, shape (m, m), optional
+        Initial measurement noise covariance, the same for every run (per-run values via :attr:`R`; None: every
+        update brings its own).
     engine : {"numpy", "filterpy"}
     """
 
-    def __init__(self, runs, P0, H, R, engine="numpy"):
+    def __init__(self, runs, P0, H=None, R=None, engine="numpy"):
         if engine not in ENGINES:
             raise ValueError(f"engine: expected one of {ENGINES}, found {engine!r}")
         P0 = np.asarray(P0, dtype=float)
         P0 = np.diag(P0) if P0.ndim == 1 else P0
         self.engine = engine
-        self.H = np.asarray(H, dtype=float)
-        self.n, self.m = P0.shape[0], self.H.shape[0]
+        self.n = P0.shape[0]
+        self.H = np.zeros((0, self.n)) if H is None else np.asarray(H, dtype=float)
+        self.m = self.H.shape[0]
+        R = np.zeros((self.m, self.m)) if R is None else np.asarray(R, dtype=float)
         self._I = np.eye(self.n)
         if engine == "filterpy":
             self.filters = []
             for _ in range(runs):
-                kf = KalmanFilter(dim_x=self.n, dim_z=self.m)
+                kf = KalmanFilter(dim_x=self.n, dim_z=max(self.m, 1))
                 kf.P = P0.copy()
                 kf.H = self.H.copy()
-                kf.R = np.array(R, dtype=float)
+                kf.R = R.copy()
                 self.filters.append(kf)
         else:
             self._x = np.zeros((runs, self.n))
             self._P = np.broadcast_to(P0, (runs, self.n, self.n)).copy()
-            self._R = np.broadcast_to(np.asarray(R, dtype=float), (runs, self.m, self.m)).copy()
+            self._R = np.broadcast_to(R, (runs, self.m, self.m)).copy()
 
     # the state, covariances and measurement noise as (R, ...) arrays, whatever the engine
     @property
@@ -90,19 +95,25 @@ class FilterBank:
         self._x = np.einsum("rij,rj->ri", F, self._x)
         self._P = F @ self._P @ np.swapaxes(F, -1, -2) + Q
 
-    def update(self, z):
-        """Measurement update with z (R, m), Joseph form."""
+    def update(self, z, H=None, R=None):
+        """Measurement update with z (R, q), Joseph form; ``H`` (q, n) or (R, q, n) and ``R`` (q, q) or (R, q, q)
+        for this update only (None: the bank's :attr:`H` and :attr:`R`)."""
+        runs = z.shape[0]
+        H = self.H if H is None else np.asarray(H, dtype=float)
+        Hr = np.broadcast_to(H, (runs,) + H.shape[-2:])
         if self.engine == "filterpy":
-            for kf, zr in zip(self.filters, z):
-                kf.update(zr[:, None])  # a column: filterpy 2 broadcasts a 1-D z silently
+            Rr = [None] * runs if R is None else np.broadcast_to(R, (runs,) + np.shape(R)[-2:])
+            for kf, zr, h, r in zip(self.filters, z, Hr, Rr):
+                kf.update(zr[:, None], R=r, H=h)  # a column: filterpy 2 broadcasts a 1-D z silently
             return
-        H, R = self.H, self._R
-        y = z - self._x @ H.T
-        PHT = self._P @ H.T
-        S = H @ PHT + R
+        R = self._R if R is None else np.broadcast_to(np.asarray(R, dtype=float), (runs,) + np.shape(R)[-2:])
+        HT = np.swapaxes(Hr, -1, -2)
+        y = z - np.einsum("rqn,rn->rq", Hr, self._x)
+        PHT = self._P @ HT
+        S = Hr @ PHT + R
         K = PHT @ np.linalg.inv(S)
         self._x = self._x + np.einsum("rij,rj->ri", K, y)
-        I_KH = self._I - K @ H
+        I_KH = self._I - K @ Hr
         self._P = I_KH @ self._P @ np.swapaxes(I_KH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
 
     def reset_x(self):

@@ -354,6 +354,18 @@ def enu_offset(position, origin):
                      position[..., 2] - h0], axis=-1)
 
 
+def displace(position, d):
+    """``position`` (..., 3) (latitude, longitude rad, height m) moved by the ENU offset ``d`` (..., 3) m: the inverse
+    of :func:`enu_offset` to first order in ``d`` over the earth's radius (the radii at ``position``; a NaN height, not
+    measured, stays NaN and counts as 0 m in the radii)."""
+    position, d = np.asarray(position, dtype=float), np.asarray(d, dtype=float)
+    rm, rn = earth.radii(position[..., 0])
+    h = np.nan_to_num(position[..., 2])
+    return np.stack([position[..., 0] + d[..., 1] / (rm + h),
+                     position[..., 1] + d[..., 0] / ((rn + h) * np.cos(position[..., 0])),
+                     position[..., 2] + d[..., 2]], axis=-1)
+
+
 def bracket(t_end, t0, tau):
     """Where times ``tau`` (n,) s fall on an IMU record: the index k (n,) of the first increment ending at or after
     each (0 .. M-1) and the fraction w (n,) of that increment, ``(tau - start) / (end - start)``, with the increment

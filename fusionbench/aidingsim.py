@@ -12,8 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import earth
-from .aiding import Aiding, lever_offset, lever_velocity
+from .aiding import Aiding, displace, lever_offset, lever_velocity
 from .imu import run_seed_sequence
 
 #: Noise streams of a run's SeedSequence (``spawn(9)``): the velocity's is the per-increment reference's.
@@ -125,15 +124,9 @@ def simulate_aiding(trajectory, spec: AidingSpec, duration=None, runs=1, seed=0,
     if spec.position_sigma is not None:
         if fixed:
             truth = trajectory.truth(np.zeros_like(tv))
-        d = lever_offset(truth.C_bn, lever)
-        rm, rn = earth.radii(truth.lat)
-        p = np.stack([truth.lat + d[:, 1] / (rm + truth.h), truth.lon + d[:, 0] / ((rn + truth.h) * np.cos(truth.lat)),
-                      truth.h + d[:, 2]], axis=-1)
+        p = displace(np.stack([truth.lat, truth.lon, truth.h], axis=-1), lever_offset(truth.C_bn, lever))
         n = _noisy(np.zeros_like(p), spec.position_sigma, q, streams, _POSITION)
-        rm_r, rn_r = rm[None], rn[None]
-        out["position"] = p[None] + np.stack([n[..., 1] / (rm_r + p[None, :, 2]),
-                                              n[..., 0] / ((rn_r + p[None, :, 2]) * np.cos(p[None, :, 0])),
-                                              n[..., 2]], axis=-1)
+        out["position"] = displace(np.broadcast_to(p, n.shape), n)
     sig = {name: (None if np.all(np.asarray(s) == 0) else np.broadcast_to(np.asarray(s, dtype=float), (keep.sum(), 3)))
            for name, s in (("sigma_v", spec.velocity_sigma), ("sigma_p", spec.position_sigma)) if s is not None}
     at_rest = np.ones(keep.sum(), bool) if fixed and spec.position_sigma is None else None

@@ -7,7 +7,8 @@ import sys
 import numpy as np
 import pytest
 
-from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner, discretize, error_model
+from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner
+from baselines.kalman_filter import discretize, error_model
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
@@ -33,6 +34,19 @@ def test_error_model_has_the_textbook_blocks():
     from scipy.linalg import expm
     Phi, _ = discretize(F[None], np.zeros((1, 11, 11)), 0.1)
     assert Phi[0] == pytest.approx(expm(F * 0.1), abs=1e-6)
+    # with position rows the filter carries the east and north position errors (m): dp' = dv, nothing else
+    Fp = error_model(C, f, w, 2 * w, position=True)[0]
+    assert Fp.shape == (13, 13) and np.array_equal(Fp[:11, :11], F)
+    assert np.array_equal(Fp[11:, 3:5], np.eye(2)) and np.count_nonzero(Fp[11:]) == 2 and not Fp[:, 11:].any()
+
+
+def test_akf_takes_the_scenarios_reference_noise():
+    # changed: akf's options were **kw, so a scenario's reference noise never reached it (0.05 m/s whatever the
+    # reference: on the 0.1 m/s moving base its Q inflation then took it 3.7 bounds off)
+    from fusionbench.aligner import load_method
+
+    assert load_method("akf", vref_sigma=0.1).vref_sigma == 0.1
+    assert load_method("akf", imu="tactical").spec.name == "tactical"
 
 
 @pytest.mark.parametrize("method", [KalmanAligner, AdaptiveKalmanAligner])
@@ -52,7 +66,8 @@ def test_noise_free_biased_data_lands_on_the_limits(method, heading):
 
 def test_kalman_filter_is_consistent_over_50_monte_carlo_runs():
     # biases drawn per run from the filter's own prior (seed 000's figures as sigmas), so that the
-    # actual error, unobservable bias part included, should match the predicted sigma
+    # actual error, unobservable bias part included, should match the predicted sigma; the reference at every
+    # increment (100 Hz) now enters every 0.1-s step as the mean of its 10 rows (it was the last row of the step)
     base = PRESETS["seed000"]
     spec = IMUSpec(gyro=SensorErrors(bias_sigma=base.gyro.bias, white=base.gyro.white, scale=base.gyro.scale),
                    accel=SensorErrors(bias_sigma=base.accel.bias, white=base.accel.white, scale=base.accel.scale))
