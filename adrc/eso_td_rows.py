@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusionbench.aiding import bracket, enu_offset, lever_offset, lever_velocity
+from fusionbench.aiding import bracket, enu_offset, lever_offset, lever_velocity, rate_at
 
 #: Kinds of measurement: a velocity (or at-rest) row at one time; the mean over a position interval.
 POINT, INTERVAL = 0, 1
@@ -241,7 +241,7 @@ class StepRows:
         F_at = (1.0 - w) * F_ext[:, k] + w * F_ext[:, k + 1]
         if lev.any():
             C = C_bn[:, k[lev]]
-            w_nb = dth[:, k[lev]] / dt - np.einsum("rnji,rj->rni", C, w_in)  # omega_ib^b - C_bn^T omega_in^n
+            w_nb = rate_at(dth, dt, k[lev], w[lev, 0]) - np.einsum("rnji,rj->rni", C, w_in)  # omega_ib^b - C omega_in
             v_at[:, lev] += lever_velocity(C, w_nb, self.lever_arm)[..., :2]
         e = v_at - self.value[:, i0:i1]
         iv = self.kind[i0:i1] == INTERVAL

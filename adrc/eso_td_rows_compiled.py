@@ -32,6 +32,22 @@ def _lever_velocity(C, w_ib, w_in, lever_arm, out):
 
 
 @numba.njit(cache=True)
+def _rate_at(dth, r, k, w, dt, out):
+    """:func:`fusionbench.aiding.rate_at` for one row of run r: the gyros' rate (rad/s) at the fraction w of increment
+    k of ``dth`` (R, m, 3), on the line through the two nearest increments' middles."""
+    m = dth.shape[1]
+    if m == 1:
+        for c in range(3):
+            out[c] = dth[r, k, c] / dt
+        return
+    j0 = k if w >= 0.5 else k - 1
+    j0 = min(max(j0, 0), m - 2)
+    f = k + w - 0.5 - j0
+    for c in range(3):
+        out[c] = ((1.0 - f) * dth[r, j0, c] + f * dth[r, j0 + 1, c]) / dt
+
+
+@numba.njit(cache=True)
 def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks, w_in, dt, y, Fbar, e_last):
     """Step ``j``'s measurement for run ``r``; False without rows in the step.
 
@@ -53,6 +69,7 @@ def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks,
     start, kind, kk, ww, lever, value, mark0, mark1, inv_T, mark_start, mark_k, mark_w, lever_arm = rw[:13]
     m = out_v.shape[1]
     I0, I1, cum, lv, e, F = np.empty(5), np.empty(5), np.zeros(5), np.empty(3), np.empty(2), np.empty(3)
+    rt = np.empty(3)
     if mark_k.shape[0] > 0:  # the integrals of the unreset velocity and of int f_n dt, at the marks and the end
         ia, b = mark_start[j], mark_start[j + 1]
         for k in range(m):
@@ -83,7 +100,8 @@ def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks,
             for c in range(2):
                 e[c] = (1.0 - w) * (v_prev[r, c] if k == 0 else out_v[r, k - 1, c]) + w * out_v[r, k, c]
             if lever[i] == 1:
-                _lever_velocity(out_C[r, k], dth[r, k] / dt, w_in, lever_arm, lv)
+                _rate_at(dth, r, k, w, dt, rt)
+                _lever_velocity(out_C[r, k], rt, w_in, lever_arm, lv)
                 for c in range(2):
                     e[c] = e[c] + lv[c]
             for c in range(2):

@@ -35,7 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aiding import bracket, displace, enu_offset, lever_offset, lever_velocity
+from fusionbench.aiding import bracket, displace, enu_offset, lever_offset, lever_velocity, rate_at
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.strapdown import NavState, Strapdown
 
@@ -215,7 +215,7 @@ def step_measurement(rows, i0, i1, a, state, w_ib, F):
         if moving.any() and np.any(rows.lever):  # the antenna's velocity about the IMU; at rest: the IMU itself
             Cv, p_v = at("C_bn", vel), at("pos", vel)
             w_in = earth.earth_rate_n(p_v[..., 0]) + earth.transport_rate_n(at("v_n", vel), p_v[..., 0], p_v[..., 2])
-            w_nb = w_ib[:, kl[vel]] - np.einsum("rnji,rnj->rni", Cv, w_in)
+            w_nb = rate_at(w_ib, 1.0, kl[vel], w[vel]) - np.einsum("rnji,rnj->rni", Cv, w_in)
             lev = lever_velocity(Cv, w_nb, rows.lever) * moving[vel][None, :, None]
             z = z + lev[..., :2]
         parts.append(mean(z, lev, rows.wv, vel, 3) + ((0, 1),))

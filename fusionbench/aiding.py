@@ -366,6 +366,22 @@ def displace(position, d):
                      position[..., 2] + d[..., 2]], axis=-1)
 
 
+def rate_at(dth, dt, k, w):
+    """The gyros' rate (R, n, 3), rad/s, body frame, at the fraction ``w`` (n,) of the increments ``k`` (n,) of
+    ``dth`` (R, N, 3) (angle increments, rad, over intervals of ``dt`` s; :func:`bracket` gives ``k``, ``w``): each
+    increment's mean rate belongs to its interval's middle, and the rate at a row's time lies on the line through the
+    two nearest middles (interpolated, extrapolated by at most half an interval at the array's ends): exact for a rate
+    that changes linearly, where the increment's own mean would be half an interval late or early (a turn rate
+    changing by 4 deg/s a second puts a 1.5-m lever arm's velocity 0.5 mm/s off at 100 Hz)."""
+    N = dth.shape[1]
+    k, w = np.asarray(k), np.asarray(w, dtype=float)
+    if N == 1:
+        return dth[:, k] / dt
+    j0 = np.clip(np.where(w >= 0.5, k, k - 1), 0, N - 2)
+    f = (k + w - 0.5 - j0)[None, :, None]
+    return ((1.0 - f) * dth[:, j0] + f * dth[:, j0 + 1]) / dt
+
+
 def bracket(t_end, t0, tau):
     """Where times ``tau`` (n,) s fall on an IMU record: the index k (n,) of the first increment ending at or after
     each (0 .. M-1) and the fraction w (n,) of that increment, ``(tau - start) / (end - start)``, with the increment

@@ -45,7 +45,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import earth
-from .aiding import bracket, lever_velocity
+from .aiding import bracket, lever_velocity, rate_at
 from .coarse_inertial import integrate_track, velocity_integral_inertial
 from .coarse_position import displacement_integral, displacements, project_line
 
@@ -200,10 +200,10 @@ def at_samples(out, kept, s, first):
 
 
 def mean_rate(dth, dt, pl):
-    """The gyros' mean rate (R, K, 3), rad/s, body frame, at each row of :class:`Placement` ``pl``: over its
-    increment, or over a wide row's interval (the angle increments ``dth`` (R, N, 3) rad summed, their
-    non-commutativity, second order in the angle, neglected); ``dt`` the sample interval, s."""
-    rate = dth[:, pl.k] / dt
+    """The gyros' rate (R, K, 3), rad/s, body frame, at each row of :class:`Placement` ``pl``
+    (:func:`fusionbench.aiding.rate_at`), or the mean over a wide row's interval (the angle increments ``dth`` (R, N, 3) rad summed, their non-commutativity, second order in the angle,
+    neglected); ``dt`` the sample interval, s."""
+    rate = rate_at(dth, dt, pl.k, pl.w)
     if pl.wide.any():
         theta = np.concatenate([np.zeros((dth.shape[0], 1, 3)), np.cumsum(dth, axis=1)], axis=1)
 

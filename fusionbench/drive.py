@@ -2,14 +2,16 @@
 
 A :class:`Drive` is both the attitude profile and the translation of a :class:`fusionbench.trajectory.Trajectory`
 (build one with :func:`drive`): the body's forward axis points along the velocity over the ground, so a turn turns
-the velocity with the heading, and the centripetal acceleration of the turn is in the specific force. Each leg
-has a constant tangential acceleration and a constant heading rate; speed and heading are continuous from leg to
-leg, their rates jump. Frames and conventions as in :mod:`fusionbench.trajectory`: ENU, body RFU, ``C_bn =
-Rz(yaw) Rx(pitch) Ry(roll)`` with yaw = -heading; pitch and roll are the IMU's fixed mounting tilt (the velocity
-stays horizontal). SI inside: rad, rad/s, m/s, m/s^2, s.
+the velocity with the heading, and the centripetal acceleration of the turn is in the specific force. In each leg
+the tangential acceleration and the heading rate rise from zero and fall back to it, a raised cosine
+``x(tau) = x_mean (1 - cos(2 pi tau / d))`` over the leg's length d (twice the mean at the middle), as a driver
+presses a pedal or turns the wheel: speed, heading and both their rates are continuous everywhere, so no instant
+of the record (an aiding row's, say) sees a rate that jumps. Frames and conventions as in
+:mod:`fusionbench.trajectory`: ENU, body RFU, ``C_bn = Rz(yaw) Rx(pitch) Ry(roll)`` with yaw = -heading; pitch and
+roll are the IMU's fixed mounting tilt (the velocity stays horizontal). SI inside: rad, rad/s, m/s, m/s^2, s.
 
 The IMU simulator integrates each sample interval with Gauss-Legendre quadrature, exact for smooth motion: leg
-boundaries on the sample grid (durations in whole samples) keep every interval inside one leg.
+boundaries on the sample grid (durations in whole samples) keep every interval inside one leg's formula.
 """
 
 from __future__ import annotations
@@ -31,9 +33,10 @@ class Leg:
     duration : float
         Length, s.
     accel : float
-        Tangential acceleration (rate of change of speed), m/s^2; negative brakes.
+        Mean tangential acceleration (rate of change of speed) over the leg, m/s^2; negative brakes.
     turn_rate : float
-        Heading rate, rad/s, clockwise from above positive (a right turn); the yaw rate is its negative.
+        Mean heading rate over the leg, rad/s, clockwise from above positive (a right turn); the yaw rate is its
+        negative.
     """
 
     duration: float
@@ -80,16 +83,21 @@ class Drive:
         return np.array(t), np.array(s), np.array(h), acc, rate
 
     def _state(self, t):
-        """Speed (N,), heading (N,), tangential acceleration (N,) and heading rate (N,) at times ``t`` (s)."""
+        """Speed (N,), heading (N,), tangential acceleration (N,) and heading rate (N,) at times ``t`` (s): in a leg
+        of length d from its start, ``x' = x'_mean (1 - cos(2 pi tau / d))``, so ``x = x_start + x'_mean (tau -
+        d sin(2 pi tau / d) / 2 pi)``."""
         t = np.asarray(t, dtype=float)
         tk, sk, hk, acc, rate = self._table()
         i = np.clip(np.searchsorted(tk, t, side="right") - 1, 0, max(len(self.legs) - 1, 0))
         inside = (t >= tk[0]) & (t < tk[-1]) if self.legs else np.zeros(t.shape, bool)
-        a = np.where(inside, acc[i] if self.legs else 0.0, 0.0)
-        r = np.where(inside, rate[i] if self.legs else 0.0, 0.0)
+        d = np.diff(tk)[i] if self.legs else np.ones(t.shape)
         tau = np.where(inside, t - tk[i], 0.0)
-        s = np.where(t < tk[0], sk[0], np.where(inside, sk[i] + a * tau, sk[-1]))
-        h = np.where(t < tk[0], hk[0], np.where(inside, hk[i] + r * tau, hk[-1]))
+        arg = 2.0 * np.pi * tau / d
+        shape, ramp = 1.0 - np.cos(arg), tau - d * np.sin(arg) / (2.0 * np.pi)
+        a = np.where(inside, (acc[i] if self.legs else 0.0) * shape, 0.0)
+        r = np.where(inside, (rate[i] if self.legs else 0.0) * shape, 0.0)
+        s = np.where(t < tk[0], sk[0], np.where(inside, sk[i] + (acc[i] if self.legs else 0.0) * ramp, sk[-1]))
+        h = np.where(t < tk[0], hk[0], np.where(inside, hk[i] + (rate[i] if self.legs else 0.0) * ramp, hk[-1]))
         return s, h, a, r
 
     # the attitude-profile protocol (EulerSway, RotationSequence)
@@ -129,8 +137,9 @@ def drive(lat, lon=0.0, h=0.0, legs=(), heading=0.0, speed=0.0, start=0.0, pitch
 
 def car_legs(duration):
     """The legs of a car's drive with turns lasting at least ``duration`` s (:func:`car_drive`): from rest it
-    accelerates at 0.5 m/s^2 to 10 m/s, then alternates straight stretches and 40-deg turns right and left (5 deg/s
-    for 8 s), slowing to 6 m/s for each turn and back to 10 m/s after it. Every leg is a whole number of 0.1 s."""
+    accelerates (0.5 m/s^2 on average) to 10 m/s, then alternates straight stretches and 40-deg turns right and left
+    (over 8 s: 5 deg/s on average, 10 at the apex), slowing to 6 m/s for each turn and back to 10 m/s after it.
+    Every leg is a whole number of 0.1 s."""
     deg = np.pi / 180.0
     legs = [Leg(20.0, 0.5)]
     sign = 1.0

@@ -145,9 +145,13 @@ def test_a_drive_moves_along_its_heading_and_turns_by_its_legs():
     # the velocity points along the body's forward axis
     fwd = T.C_bn[:, :, 1]
     assert np.allclose(fwd[:, :2] * speed[:, None], T.v_n[:, :2], atol=1e-9)
-    # the turn's centripetal acceleration: speed x heading rate, to the right
+    # at the turn's apex (mid-leg, twice the mean rate) the acceleration is centripetal, speed x heading rate
     _, a = tr.velocity([34.0])
-    assert np.linalg.norm(a) == pytest.approx(10.0 * 5.0 * D)
+    assert np.linalg.norm(a) == pytest.approx(10.0 * 2 * 5.0 * D)
+    assert np.dot(a[0], tr.truth([34.0]).C_bn[0, :, 0]) == pytest.approx(10.0 * 2 * 5.0 * D)  # to the right
+    # every rate is continuous: at a leg's ends the acceleration and the turn rate are zero
+    _, a = tr.velocity([20.0 - 1e-9, 20.0, 30.0, 38.0 - 1e-9])
+    assert np.abs(a).max() < 1e-6
     assert not tr.translation.is_static() and drive.Drive().is_static()
 
 

@@ -9,6 +9,8 @@ default (``PRINTED_FEEDBACK``); the default configuration (expanding-memory ESO,
 checked at the end of this file and in ``tests/test_eso_td_accuracy.py``.
 """
 
+import re
+
 import numpy as np
 import pytest
 
@@ -395,11 +397,15 @@ def test_a_moving_base_without_a_reference_is_refused_naming_the_method_and_the_
                                              r"base needs its velocity or position as aiding \(--aiding FILE\)$"):
             ESOTDAligner().align(data, SITE, init=init)
     # a velocity change during the record (0.01 g from 30 s) shows in the fit's residual, which no rotation of
-    # gravity explains: measured 0.97 m/s against the 0.24 m/s a stationary or swaying base stays within
+    # gravity explains: measured 0.55 m/s over the first 60 s against the 0.17 m/s a stationary or swaying base stays
+    # within there (fusionbench.motion)
     tr = tj.accelerating(LAT, accel=0.01 * 9.80665, start=30.0, duration=120.0)
-    with pytest.raises(ValueError, match=r"^eso-td: the base moves .*departs from gravity's by 0\.9\d m/s of "
-                                         r"horizontal velocity"):
+    with pytest.raises(ValueError, match=r"^eso-td: the base moves .*departs from gravity's by .* m/s of "
+                                         r"horizontal velocity") as refused:
         ESOTDAligner().align(simulate(tr, PRESETS["seed001"].noise_free(), 0.1), SITE)
+    found, limit = map(float, re.search(r"by (\d+\.\d+) m/s of horizontal velocity, a stationary or swaying base "
+                                        r"by less than (\d+\.\d+)", str(refused.value)).groups())
+    assert found > 3 * limit
 
 
 def test_options_that_do_not_apply_are_refused_in_one_line():
