@@ -105,3 +105,25 @@ def test_readme_recording_identify_consistency_twin(tmp_path, monkeypatch):
     run(["fusionbench", *small[:small.index("--out") + 1], "twin-small", *small[small.index("--out") + 2:]])
     m = json.loads((tmp_path / "twin-small" / "metrics.json").read_text())
     assert {c["lat_deg"] for c in m["conditions"].values()} == {34.2} and m["conditions"]["static-h0"]["imu"] == "bench"
+
+
+def test_readme_moving_recording_walk_through(tmp_path, monkeypatch, capsys):
+    """"Align a moving recording": the block writes the files, the command prints what the README shows, the answer
+    is near the truth the block prints, and without the aiding, or to a method of fixed bases, it is refused."""
+    from fusionbench.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    ns = _run_block('write_csv("gnss.csv"')
+    assert "the truth at 300 s: pitch 1.0000 deg, roll -2.0000 deg, heading 70.0000 deg" in capsys.readouterr().out
+    cmd, shown = _shown("align drive.imu --method kf --aiding")
+    assert main(cmd[1:]) == 0
+    printed = capsys.readouterr().out.strip("\n").split("\n")
+    _same_numbers(shown, printed)
+    pitch, roll, heading = (float(x) for x in re.findall(r"-?\d+\.\d+", printed[-1]))
+    # within three of this drive's attainable bounds (about 1 arcmin of heading, 0.05 of level) of the truth
+    assert abs(pitch - 1.0) * 60 < 0.2 and abs(roll + 2.0) * 60 < 0.2 and abs(heading - 70.0) * 60 < 3.0
+    assert ns["car"].duration == 300.0
+    for args in (cmd[1:cmd.index("--aiding")], cmd[1:3] + ["--method", "adrc"] + cmd[5:]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and ("--aiding FILE" in err or "expected none or rows at rest" in err), err
