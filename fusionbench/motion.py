@@ -43,6 +43,7 @@ import numpy as np
 
 from . import earth
 from .claims import check_not_accelerating
+from .strapdown import _rodrigues3
 
 #: Lengths of the windows fitted one by one, s, beside the whole record: the short ones see a brief change of
 #: velocity, the long ones a steady acceleration (which a short window takes for a tilt).
@@ -87,23 +88,7 @@ def _integrate(dth, dv, keep, out):
             V0 += C[0, 0] * u0 + C[0, 1] * u1 + C[0, 2] * u2
             V1 += C[1, 0] * u0 + C[1, 1] * u1 + C[1, 2] * u2
             V2 += C[2, 0] * u0 + C[2, 1] * u1 + C[2, 2] * u2
-            x2 = a0 * a0 + a1 * a1 + a2 * a2
-            if x2 < 1e-6:
-                s = 1.0 - x2 / 6.0 * (1.0 - x2 / 20.0)
-                c = 0.5 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0))
-            else:
-                x = np.sqrt(x2)
-                s = np.sin(x) / x
-                c = (1.0 - np.cos(x)) / x2
-            B[0, 0] = 1.0 - c * (a1 * a1 + a2 * a2)
-            B[1, 1] = 1.0 - c * (a0 * a0 + a2 * a2)
-            B[2, 2] = 1.0 - c * (a0 * a0 + a1 * a1)
-            B[0, 1] = -s * a2 + c * a0 * a1
-            B[1, 0] = s * a2 + c * a0 * a1
-            B[0, 2] = s * a1 + c * a0 * a2
-            B[2, 0] = -s * a1 + c * a0 * a2
-            B[1, 2] = -s * a0 + c * a1 * a2
-            B[2, 1] = s * a0 + c * a1 * a2
+            _rodrigues3(a0, a1, a2, B)
             for i in range(3):
                 for m in range(3):
                     T[i, m] = C[i, 0] * B[0, m] + C[i, 1] * B[1, m] + C[i, 2] * B[2, m]
