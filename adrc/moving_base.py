@@ -674,9 +674,11 @@ class ESOTDAligner(AlignerBase):
     # navigation-grade gyros only: with a tactical IMU its levels end 0.6-0.7 arcmin from the limit (conformance).
     # Aiding (a car with turns, navigation grade, 20'/40' start; tests/test_eso_td_aiding.py): velocity at 10 Hz
     # (1.45 x kf's azimuth rms) or 1 Hz (1.07 x), 1-Hz positions of 0.5 m (1.0 x; levels 0.1-0.2', 0.6' at 2 m),
-    # a 60-s outage (2.2 x): claimed; 0.5-Hz velocity (1.9 x) and a 120-s outage (2.6 x) are not
+    # a 60-s outage (2.2 x): claimed; 0.5-Hz velocity (1.9 x) and a 120-s outage (2.6 x) are not. The conformance
+    # matrix (20 runs): the drives 1.5-2.7 bounds (threshold 3); an outage from 150 s on the 45-S drive 2.86 (30 s),
+    # 2.96 (45 s), 3.04 (60 s): outages claimed up to 30 s
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05,
-                        aiding=("velocity", "position"), min_aiding_hz=1.0, max_outage_s=60.0)
+                        aiding=("velocity", "position"), min_aiding_hz=1.0, max_outage_s=30.0)
     max_latitude_deg = MAX_LATITUDE_DEG  # eq. 12 divides by the horizontal earth rate
     description = ("ESO/TD alignment (seed 001): 2nd-order ESO per level velocity channel, the azimuth from "
                    "eq. 12's derivative (least-squares TD); moving base with velocity or position aiding, static or "
