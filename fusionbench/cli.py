@@ -131,6 +131,20 @@ def _cmd_list(args):
     return 0
 
 
+def _moving_claim(claims):
+    """What a method claims of the aiding on a moving base, for ``list`` ("" when it claims no moving base)."""
+    if "moving" not in claims.bases:
+        return ""
+    words = [" or ".join(claims.aiding) + " rows"]
+    if claims.min_aiding_hz > 0:
+        words.append(f"from {claims.min_aiding_hz:g} Hz")
+    if np.isfinite(claims.max_outage_s):
+        words.append(f"outages to {claims.max_outage_s:g} s")
+    if claims.max_bias_ratio_moving is not None and claims.max_bias_ratio_moving < claims.max_bias_ratio:
+        words.append(f"gyro bias up to {claims.max_bias_ratio_moving:g} of the horizontal earth rate")
+    return "; moving: " + ", ".join(words)
+
+
 def _method_notes(cls):
     """What ``list`` adds to a method's description: the options of a named variant, its default noise model."""
     notes = []
@@ -138,8 +152,8 @@ def _method_notes(cls):
     notes.append("not an aligner: needs an initial attitude" if claims.needs_init else
                  f"claims {', '.join(claims.bases)} up to {claims.max_abs_lat_deg:g} deg"
                  + (f", gyro bias up to {claims.max_bias_ratio:g} of the horizontal earth rate"
-                    if claims.max_bias_ratio < MAX_BIAS_TO_EARTH_RATE else "") if claims.bases else
-                 "claims no condition: kept to reproduce its paper")
+                    if claims.max_bias_ratio < MAX_BIAS_TO_EARTH_RATE else "") + _moving_claim(claims)
+                 if claims.bases else "claims no condition: kept to reproduce its paper")
     if getattr(cls, "variant_of", None):
         opts = ", ".join(f"{k}={v!r}" for k, v in cls.variant_options.items())
         notes.append(f"variant of {cls.variant_of}: {opts}")
