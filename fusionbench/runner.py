@@ -17,7 +17,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from . import imu as imu_mod
-from . import metrics, streaming, units
+from . import earth, metrics, streaming, units
 from .aiding import Aiding
 from .aidingsim import simulate_aiding
 from .aligner import call_align, check_time_rule
@@ -203,12 +203,21 @@ def _limits(scn, traj, t, C_bn):
     """The limits (M, 3) rad of the scenario's fixed IMU biases at times ``t`` (M,) and true attitudes ``C_bn``
     (M, 3, 3): on a fixed base the theoretical limits (:func:`fusionbench.metrics.theoretical_limits`); on a moving
     one, where an acceleration or a turn makes the biases partly observable, the mean error of the optimal
-    estimator that does not know them (:func:`fusionbench.bound.bias_limit`, with the scenario's aiding)."""
+    estimator that does not know them (:func:`fusionbench.bound.bias_limit`, with the scenario's aiding); for a
+    navigation scenario (a navigator estimates no bias) the stationary formula with the motion's specific force and
+    frame rate, for the record."""
     bg, ba = scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias
     if traj.translation.is_static():
         return metrics.theoretical_limits(bg, ba, C_bn, scn.site.lat, scn.site.h)
-    t_grid, limit, _ = scn.moving_limit(traj)
     t = np.atleast_1d(np.asarray(t, dtype=float))
+    if scn.kind == "navigation":  # a navigator estimates no bias: the stationary limit along the path, for the record
+        v, _ = traj.translation.mean_velocity(t)
+        a = v - traj.translation.mean_velocity(t - 1.0)[0]  # over the last second
+        lat, _, h = traj.position(t)
+        w_ie, w_en = earth.earth_rate_n(lat), earth.transport_rate_n(v, lat, h)
+        f_n = a + np.cross(2 * w_ie + w_en, v) - earth.gravity_n(lat, h)
+        return metrics.theoretical_limits(bg, ba, C_bn, lat, h, f_n=f_n, w_in=w_ie + w_en)
+    t_grid, limit, _ = scn.moving_limit(traj)
     return np.stack([np.interp(t, t_grid, limit[:, i]) for i in range(3)], axis=-1)
 
 
