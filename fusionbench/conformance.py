@@ -64,7 +64,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     ``methods`` defaults to the file's list, else every registered aligner; ``runs`` to the file's size.
     Same seed, same numbers whatever ``n_jobs``.
     """
-    from .runner import run_alignment
+    from .runner import run_alignment, scenario_limits
 
     names = list(methods or matrix.methods or aligner_names())
     duration, default_runs = matrix.sized(quick)
@@ -99,6 +99,10 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
                 cells[n][cond.name] = {"status": "not claimed"}
         if claimed:
             todo.append((cond, scn, claimed, bound))
+        else:  # no method claims it: its limit all the same, for the table
+            traj = scn.trajectory(duration)
+            conditions[cond.name]["limit_arcmin"] = _axes(scenario_limits(scn, traj, [duration],
+                                                                  traj.truth([duration]).C_bn)[0] / units.ARCMIN)
     # one condition per worker, all its runs in one batch (the batched filters vectorize over runs); the same
     # numbers as any other split, since run k of a seed does not depend on the batching
     run = delayed(run_alignment)

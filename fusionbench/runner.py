@@ -168,7 +168,7 @@ def _align_batch(scn, name, sim, first_run, refusals):
     check_time_rule(res, data, name)
     truth_C = traj.truth(res.t).C_bn
     phi = metrics.misalignment_history(res.C_bn, truth_C)
-    limit_u = _limits(scn, traj, res.t, truth_C)[:, 2]  # (M,) rad: it moves with the attitude on a sway
+    limit_u = scenario_limits(scn, traj, res.t, truth_C)[:, 2]  # (M,) rad: it moves with the attitude on a sway
     band = scn.settling_band_arcmin * units.ARCMIN
     if res.causal:
         settle = metrics.settling_time(res.t, phi[..., 2], band, limit_u)
@@ -199,7 +199,7 @@ PREFIX_STEP_S = 25.0
 PREFIX_RUNS = 5
 
 
-def _limits(scn, traj, t, C_bn):
+def scenario_limits(scn, traj, t, C_bn):
     """The limits (M, 3) rad of the scenario's fixed IMU biases at times ``t`` (M,) and true attitudes ``C_bn``
     (M, 3, 3): on a fixed base the theoretical limits (:func:`fusionbench.metrics.theoretical_limits`); on a moving
     one, where an acceleration or a turn makes the biases partly observable, the mean error of the optimal
@@ -257,7 +257,8 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
         res = call_align(method, part, scn.site, None if aiding is None else aiding.window(-np.inf, t_inc[k]),
                          None if init is None else init)
         C_true = traj.truth([t_inc[k]]).C_bn
-        err = metrics.misalignment_history(res.C_bn[:, -1:], C_true)[:, 0, 2] - _limits(scn, traj, [t_inc[k]], C_true)[0, 2]
+        err = (metrics.misalignment_history(res.C_bn[:, -1:], C_true)[:, 0, 2]
+               - scenario_limits(scn, traj, [t_inc[k]], C_true)[0, 2])
         out = np.isnan(settle) & (np.abs(err) > band)
         settle[out] = prev[out]
         prev[:] = t_inc[k]
@@ -324,7 +325,7 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     results = [results[k0] for k0, _ in jobs]
 
     traj = scn.trajectory(duration)
-    limits = _limits(scn, traj, [duration], traj.truth([duration]).C_bn)[0]
+    limits = scenario_limits(scn, traj, [duration], traj.truth([duration]).C_bn)[0]
     outcomes, refused = {}, {}
     for name in methods:
         parts = [r[name] for r in results]
