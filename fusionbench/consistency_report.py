@@ -1,5 +1,6 @@
 """The report of a consistency check (:mod:`fusionbench.consistency`): consistency.json, consistency.png and the
-lines the command line prints.
+lines the command line prints. The folder is written whole or not at all (:mod:`fusionbench.reportdir`,
+:data:`OUTPUT`).
 
 consistency.json (``allow_nan=False``; undefined figures are null; angles in the units their names say)::
 
@@ -30,9 +31,16 @@ from pathlib import Path
 
 import numpy as np
 
-from . import attitude, units
+from . import attitude, reportdir, units
 from .consistency import Consistency
 from .imufiles import atomic_open
+
+JSON_FILE, FIGURE_FILE = "consistency.json", "consistency.png"
+#: A previous output of ``consistency``, which a new one replaces whole: consistency.json (``"kind":
+#: "consistency"``) and nothing but the two files it writes.
+OUTPUT = reportdir.Output(JSON_FILE, ("kind",), f"a previous fusionbench consistency output ({JSON_FILE}, "
+                          f"{FIGURE_FILE} and nothing else)", files=(JSON_FILE, FIGURE_FILE),
+                          values={"kind": "consistency"})
 
 AXES = ("E", "N", "U")
 EULER = ("pitch", "roll", "yaw")
@@ -203,14 +211,20 @@ def plot_consistency(res: Consistency, path):
 
 
 def write_consistency_report(res: Consistency, out_dir, aiding=None) -> list:
-    """Write consistency.png then consistency.json into ``out_dir`` (created if needed), each atomically (a
-    temporary file renamed into place), and return their paths; ``aiding`` as :func:`to_json`."""
+    """Write consistency.png and consistency.json into ``out_dir``, whole or not at all
+    (:func:`fusionbench.reportdir.written`: assembled beside it and renamed into place; after an error ``out_dir``
+    is as it was), and return their paths; ``aiding`` as :func:`to_json`.
+
+    Raises
+    ------
+    ValueError
+        One line naming ``out_dir`` when it is neither absent, nor empty, nor a previous consistency output
+        (nothing touched).
+    """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    png = out / "consistency.png"
-    plot_consistency(res, png)
-    path = out / "consistency.json"
     text = json.dumps(to_json(res, aiding), indent=1, allow_nan=False)
-    with atomic_open(path) as fh:
-        fh.write(text + "\n")
-    return [path, png]
+    with reportdir.written(out, OUTPUT) as tmp:
+        plot_consistency(res, tmp / FIGURE_FILE)
+        with atomic_open(tmp / JSON_FILE) as fh:
+            fh.write(text + "\n")
+    return [out / JSON_FILE, out / FIGURE_FILE]

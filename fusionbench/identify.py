@@ -14,7 +14,7 @@ with the datasheet's bias repeatability. The rate ramp has no counterpart in the
 
 Entry points: :func:`identify` (the numbers), :func:`summary` (lines to print), :func:`write_spec_toml`,
 :func:`write_identify_report` (identify.json and allan.png) and :func:`run_identify` (all of it, for the command
-line).
+line). The output folder is written whole or not at all (:mod:`fusionbench.reportdir`, :data:`OUTPUT`).
 """
 
 from __future__ import annotations
@@ -26,12 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from . import allan as allan_mod
-from . import allanfit, units
+from . import allanfit, reportdir, units
 from .imu import SPEC_SCALARS, IMUSpec, spec_from_table
 from .imudata import IMUData
 
-__all__ = ["MIN_SAMPLES", "MIN_TAU_S", "UNITS", "ADEV_UNITS", "Term", "Identification", "identify", "summary",
-           "spec_table", "write_spec_toml", "write_identify_report", "run_identify", "poor_fit_note", "report_dict"]
+__all__ = ["MIN_SAMPLES", "MIN_TAU_S", "UNITS", "ADEV_UNITS", "OUTPUT", "Term", "Identification", "identify",
+           "summary", "spec_table", "write_spec_toml", "write_identify_report", "run_identify", "poor_fit_note",
+           "report_dict"]
 
 #: Fewest samples a record must have.
 MIN_SAMPLES = 100
@@ -66,6 +67,11 @@ STATIC_TOLERANCE = 0.02
 #: has variance quantum^2 / 12, and white phase noise of variance Q^2 has Allan variance 3 Q^2 / tau^2.
 QUANTUM_PER_Q = math.sqrt(12.0)
 SPEC_FILE, JSON_FILE, FIGURE_FILE = "imu_spec.toml", "identify.json", "allan.png"
+#: A previous output of ``identify``, which a new one replaces whole: identify.json (its ``record``, ``method`` and
+#: ``spec``) and nothing but the three files it writes.
+OUTPUT = reportdir.Output(JSON_FILE, ("record", "method", "spec"), f"a previous fusionbench identify output "
+                          f"({JSON_FILE}, {SPEC_FILE}, {FIGURE_FILE} and nothing else)",
+                          files=(JSON_FILE, SPEC_FILE, FIGURE_FILE))
 #: [imu] keys written for each sensor: what -> key.
 _KEYS = {"gyro": {"N": "arw_dpsh", "K": "rrw_dph_rth", "instability": "gyro_instability_dph", "tau": "gyro_tau_s",
                   "quantum": "gyro_quantum_arcsec", "bias_sigma": "gyro_bias_sigma_dph"},
@@ -291,6 +297,10 @@ def _point_p(ratio, edf):
 def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
     """Identify ``imu`` and write into ``out_dir``: the spec ``imu_spec.toml``, ``identify.json`` and ``allan.png``.
 
+    The folder is written whole or not at all, as a run's report (:mod:`fusionbench.reportdir`): checked before any
+    work (it must be absent, empty or a previous identify output, :data:`OUTPUT`), assembled beside it and renamed
+    into place; after an error it is as it was.
+
     Returns
     -------
     list of str
@@ -299,15 +309,23 @@ def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
     Raises
     ------
     ValueError
-        One line: a record too short, or a figure the ``[imu]`` parser refuses.
+        One line: ``out_dir`` is not a folder identify may replace, a record too short, or a figure the ``[imu]``
+        parser refuses.
     """
-    ident = identify(imu, name=name, source=source, run=run)
-    ident.to_spec()  # a figure the parser refuses stops here, before anything is written
-    paths = write_identify_report(ident, out_dir)
-    spec = write_spec_toml(ident, Path(out_dir) / SPEC_FILE)
-    return summary(ident) + [f"wrote {spec}, {paths[0]}, {paths[1]}"]
+    out = Path(out_dir)
+    created = reportdir.prepare([out], OUTPUT)  # refused before any work
+    try:
+        ident = identify(imu, name=name, source=source, run=run)
+        ident.to_spec()  # a figure the parser refuses stops here, before anything is written
+        with reportdir.staged(out, OUTPUT) as tmp:
+            _write_report_files(ident, tmp)
+            write_spec_toml(ident, tmp / SPEC_FILE)
+    except BaseException:
+        reportdir.remove_empty(created)
+        raise
+    return summary(ident) + [f"wrote {out / SPEC_FILE}, {out / JSON_FILE}, {out / FIGURE_FILE}"]
 
 
 # what is written and printed of an identification, in its own module; its names are this module's too
-from .identify_report import (poor_fit_note, report_dict, spec_table, summary, write_identify_report,  # noqa: E402
-                              write_spec_toml)
+from .identify_report import (_write_report_files, poor_fit_note, report_dict, spec_table, summary,  # noqa: E402
+                              write_identify_report, write_spec_toml)

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import allanfit, units
-from .identify import (_KEYS, ADEV_SI, AXES, FIGURE_FILE, FIT_P_MIN, JSON_FILE, SENSORS, UNITS, Identification,
-                       _fmt, _point_p)
+from . import allanfit, reportdir, units
+from .identify import (_KEYS, ADEV_SI, AXES, FIGURE_FILE, FIT_P_MIN, JSON_FILE, OUTPUT, SENSORS, UNITS,
+                       Identification, _fmt, _point_p)
 from .imufiles import atomic_open
 
 
@@ -163,17 +163,30 @@ def report_dict(ident: Identification):
 
 
 def write_identify_report(ident: Identification, out_dir):
-    """Write ``identify.json`` (:func:`report_dict`, no NaN) and the figure ``allan.png`` into ``out_dir`` (created
-    if needed), each atomically. Returns the two paths."""
+    """Write ``identify.json`` (:func:`report_dict`, no NaN) and the figure ``allan.png`` into ``out_dir``, whole
+    or not at all (:func:`fusionbench.reportdir.written`): ``out_dir`` must be absent, empty or a previous identify
+    output (:data:`fusionbench.identify.OUTPUT`), which the two files replace. Returns the two paths.
+
+    Raises
+    ------
+    ValueError
+        One line naming ``out_dir`` when it holds other files (nothing touched).
+    """
+    out = Path(out_dir)
+    with reportdir.written(out, OUTPUT) as tmp:
+        _write_report_files(ident, tmp)
+    return [out / JSON_FILE, out / FIGURE_FILE]
+
+
+def _write_report_files(ident: Identification, folder):
+    """identify.json and allan.png into ``folder`` (a folder being assembled)."""
     from .allanplot import allan_figure  # matplotlib only when a figure is drawn
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_open(out / JSON_FILE) as fh:
+    folder = Path(folder)
+    with atomic_open(folder / JSON_FILE) as fh:
         json.dump(report_dict(ident), fh, indent=1, allow_nan=False)
         fh.write("\n")
-    allan_figure(ident, out / FIGURE_FILE)
-    return [out / JSON_FILE, out / FIGURE_FILE]
+    allan_figure(ident, folder / FIGURE_FILE)
 
 
 def _pm(value, sigma):

@@ -96,6 +96,30 @@ def theoretical_limits(gyro_bias_b, accel_bias_b, C_bn, lat, h=0.0, f_n=None, w_
     return np.linalg.solve(A, b[..., None])[..., 0]
 
 
+def _check_histories(func, x, band, target, t=None):
+    """``x`` (float, at least one sample on its last axis) checked against ``t``, ``band`` and ``target``: a
+    ValueError of one line naming the argument, what was expected and what was found."""
+    x = np.asarray(x, dtype=float)
+    if t is not None and t.ndim != 1:
+        raise ValueError(f"{func} t: expected a 1-D array of times, found shape {t.shape}")
+    if x.ndim == 0 or x.shape[-1] == 0:
+        raise ValueError(f"{func} x: expected error histories of shape (..., M), M >= 1 samples, found shape "
+                         f"{x.shape}")
+    if t is not None and x.shape[-1] != t.size:
+        raise ValueError(f"{func} x: expected error histories of shape (..., {t.size}), one value per time in t, "
+                         f"found shape {x.shape}")
+    for name, value in (("band", band), ("target", target)):
+        shape = np.shape(value)
+        try:
+            fits = np.broadcast_shapes(shape, x.shape) == x.shape
+        except ValueError:
+            fits = False
+        if not fits:
+            raise ValueError(f"{func} {name}: expected a value broadcastable to x's shape {x.shape}, found shape "
+                             f"{shape}")
+    return x
+
+
 def settling_time(t, x, band, target=0.0):
     """First time after which ``|x - target|`` stays inside ``band`` until the end.
 
@@ -110,7 +134,7 @@ def settling_time(t, x, band, target=0.0):
         Times, s.
     x : array_like, shape (..., M)
         Error histories, e.g. phiU in arcmin.
-    band : float
+    band : float or array_like broadcastable to ``x``
         Half-width of the band, same units as ``x``.
     target : float or array_like broadcastable to ``x``
         Where the error should settle (the limit), same units as ``x``.
@@ -120,9 +144,15 @@ def settling_time(t, x, band, target=0.0):
     ndarray, shape (...)
         Settling time, s: ``t[0]`` if always inside; ``t[-1]`` for a history that ends outside the band
         (not settled: :func:`settled` tells these apart).
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument: ``t`` not 1-D, ``x`` empty or not ending in ``t``'s length, ``band`` or
+        ``target`` not broadcastable to ``x``.
     """
     t = np.asarray(t, dtype=float)
-    x = np.asarray(x, dtype=float)
+    x = _check_histories("settling_time", x, band, target, t)
     outside = np.abs(x - target) > band
     any_out = outside.any(axis=-1)
     last_out = x.shape[-1] - 1 - np.argmax(outside[..., ::-1], axis=-1)
@@ -131,10 +161,14 @@ def settling_time(t, x, band, target=0.0):
 
 
 def settled(x, band, target=0.0):
-    """Whether each history ``x`` (..., M) ends inside ``band`` around ``target`` (bool, shape (...))."""
-    x = np.asarray(x, dtype=float)
+    """Whether each history ``x`` (..., M) ends inside ``band`` around ``target`` (bool, shape (...)).
+
+    ``band`` and ``target`` as in :func:`settling_time`, broadcastable to ``x``; otherwise, or for an empty
+    ``x``, ValueError (one line naming the argument)."""
+    x = _check_histories("settled", x, band, target)
     target = np.broadcast_to(np.asarray(target, dtype=float), x.shape)
-    return np.abs(x[..., -1] - target[..., -1]) <= band
+    band = np.broadcast_to(np.asarray(band, dtype=float), x.shape)
+    return np.abs(x[..., -1] - target[..., -1]) <= band[..., -1]
 
 
 def stats(x):

@@ -433,6 +433,130 @@ def test_the_current_folder_is_never_replaced(tmp_path, monkeypatch):
         reportdir.check_replaceable(".")
 
 
+# ---------------------------------------------------------------------------------------- a killed run's leftovers
+
+#: Assembles a report, touches argv[2] and waits to be killed.
+KILLED = """import pathlib, sys, time
+from fusionbench import reportdir
+with reportdir.staged(sys.argv[1]) as tmp:
+    (tmp / "metrics.json").write_text("half a report")
+    pathlib.Path(sys.argv[2]).touch()
+    time.sleep(60)
+"""
+
+
+def dead_pid():
+    """The pid of a process that has ended."""
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def leftover(parent, name, what, pid, host=None):
+    """A hidden folder as a run of process ``pid`` on ``host`` (this one) leaves it, a file in it."""
+    path = parent / f".{name}.{what}-{pid}-{host or reportdir.HOST}-deadbeef"
+    path.mkdir()
+    (path / "metrics.json").write_text("half a report")
+    return path
+
+
+def test_a_killed_runs_leftover_is_removed_by_the_next_run_and_a_live_runs_kept(capsys, tmp_path, tiny):
+    out = tmp_path / "rep"
+    fake_report(out)
+    started = tmp_path / "started"
+    p = subprocess.Popen([sys.executable, "-c", KILLED, str(out), str(started)])
+    try:
+        deadline = time.monotonic() + 60
+        while not started.exists():
+            assert time.monotonic() < deadline and p.poll() is None
+            time.sleep(0.05)
+    finally:
+        p.kill()  # SIGKILL: no clean-up runs
+        p.wait()
+    killed = hidden(tmp_path)
+    assert len(killed) == 1 and killed[0].startswith(f".rep.tmp-{p.pid}-")
+    live = leftover(tmp_path, "rep", "tmp", os.getpid())  # a run going on: this process
+    elsewhere = leftover(tmp_path, "rep", "tmp", dead_pid(), "000000" if reportdir.HOST != "000000" else "ffffff")
+    aside = leftover(tmp_path, "rep", "old", dead_pid())
+    status, _, err = fb(capsys, "run", tiny, "--jobs", 1, "--out", out)
+    assert status == 0, err
+    assert sorted(hidden(tmp_path)) == sorted([live.name, elsewhere.name]) and not aside.exists()
+    assert (live / "metrics.json").read_text() == "half a report"  # a live run's, untouched
+    assert "old" not in json.loads((out / "metrics.json").read_text())
+
+
+def test_run_all_removes_each_scenarios_leftovers_before_any_work(capsys, tmp_path, monkeypatch):
+    import fusionbench.experiment
+
+    def stop(*args, **kwargs):
+        raise ValueError("stopped after the folders were checked")
+
+    monkeypatch.setattr(fusionbench.experiment, "run_scenario", stop)
+    out = tmp_path / "all"
+    out.mkdir()
+    live = [leftover(out, name, what, os.getpid()).name
+            for name in ("static-34n", "sway-34n") for what in ("tmp", "old")]
+    for name in ("static-34n", "sway-34n", "conformance"):
+        leftover(out, name, "tmp", dead_pid())
+    status, _, err = fb(capsys, "run", "all", "--out", out)
+    assert status == 2
+    one_line(err, "stopped after the folders were checked")
+    assert sorted(hidden(out)) == sorted(live)
+
+
+def test_a_report_set_aside_by_a_killed_run_is_put_back(tmp_path):
+    out = tmp_path / "rep"
+    before = fake_report(out)
+    pid = dead_pid()
+    os.rename(out, tmp_path / f".rep.old-{pid}-{reportdir.HOST}-deadbeef")  # killed between the two renames
+    leftover(tmp_path, "rep", "tmp", pid)
+    assert reportdir.prepare([out]) == []
+    assert snapshot(out) == before and hidden(tmp_path) == []
+
+
+def test_only_the_targets_own_leftovers_are_swept(tmp_path):
+    pid = dead_pid()
+    others = [leftover(tmp_path, name, "tmp", pid).name for name in ("rep.x", "rep2", "re")]
+    legacy = leftover(tmp_path, "rep", "tmp", pid).rename(tmp_path / f".rep.tmp-{pid}-deadbeef")  # before the host
+    (tmp_path / f".rep.tmp-{pid}-{reportdir.HOST}-not-hex").mkdir()  # not a name fusionbench makes
+    (tmp_path / f".rep.tmp-{pid}-{reportdir.HOST}-deadbeef").write_text("a file, not a folder")
+    assert reportdir.sweep(tmp_path / "rep") == [legacy]
+    assert sorted(hidden(tmp_path)) == sorted(others + [f".rep.tmp-{pid}-{reportdir.HOST}-not-hex",
+                                                        f".rep.tmp-{pid}-{reportdir.HOST}-deadbeef"])
+
+
+@pytest.mark.parametrize("command", ["identify", "consistency"])
+def test_identify_and_consistency_refuse_a_folder_of_other_files(capsys, tmp_path, recording, command, monkeypatch):
+    import fusionbench.identify
+
+    monkeypatch.setattr(fusionbench.identify, "identify", lambda *a, **k: pytest.fail("identified before the check"))
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("years of work")
+    (out / "data").mkdir()
+    before = snapshot(out)
+    args = ["--lat", 34, "--methods", "coarse", "--window", 20] if command == "consistency" else []
+    status, stdout, err = fb(capsys, command, recording, "--out", out, *args)
+    assert status == 2 and stdout == ""
+    one_line(err, f"{out}: ", f"previous fusionbench {command} output", "found other files", "--out another folder")
+    assert snapshot(out) == before and hidden(tmp_path) == []
+    fake_report(tmp_path / "rep")  # a run's report is not theirs to replace either
+    assert fb(capsys, command, recording, "--out", tmp_path / "rep", *args)[0] == 2
+
+
+def test_consistency_replaces_its_previous_output_and_sweeps_a_killed_ones(capsys, tmp_path, recording):
+    out = tmp_path / "cons"
+    args = ["consistency", recording, "--lat", 34, "--methods", "coarse", "--window", 20, "--out", out]
+    assert fb(capsys, *args)[0] == 0
+    live = leftover(tmp_path, "cons", "tmp", os.getpid())
+    leftover(tmp_path, "cons", "tmp", dead_pid())
+    status, stdout, err = fb(capsys, *args[:-4], "--methods", "coarse,coarse-i0", *args[-4:])
+    assert status == 0, err
+    assert set(json.loads((out / "consistency.json").read_text())["methods"]) == {"coarse", "coarse-i0"}
+    assert sorted(p.name for p in out.iterdir()) == ["consistency.json", "consistency.png"]
+    assert hidden(tmp_path) == [live.name]
+
+
 # ---------------------------------------------------------------------------------------- check
 
 

@@ -265,3 +265,58 @@ def test_report_and_summary(record, tmp_path):
     assert coarse["attitude_deg"]["yaw"] == pytest.approx([123.0] * 2, abs=1e-6)
     assert abs(coarse["disagreement_arcmin"]["U"][0]) < 1e-4
     assert set(doc["bound"]) == {"bound_arcmin", "expected_disagreement_arcmin"}
+
+
+def _snapshot(folder):
+    from pathlib import Path
+
+    return {p.relative_to(folder).as_posix(): None if p.is_dir() else p.read_bytes()
+            for p in sorted(Path(folder).rglob("*"))}
+
+
+def test_the_report_folder_is_replaced_whole_or_left_as_it_was(record, tmp_path, monkeypatch):
+    """A figure that fails half-written leaves the previous output exactly as it was; a new one replaces it."""
+    from fusionbench import figures
+
+    res = consistency(record, SITE, ["coarse"], window_s=50.0)
+    out = tmp_path / "out"
+    write_consistency_report(res, out)
+    before = _snapshot(out)
+    assert set(before) == {"consistency.json", "consistency.png"}
+
+    def half_then_fail(fig, path):
+        with open(path, "wb") as fh:
+            fh.write(b"half a figure")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(figures, "save_png", half_then_fail)
+    with pytest.raises(OSError, match="No space left"):
+        write_consistency_report(res, out, aiding={"file": "new"})
+    assert _snapshot(out) == before and [p.name for p in tmp_path.iterdir()] == ["out"]  # nothing hidden left
+    monkeypatch.undo()
+    two = consistency(record, SITE, ["coarse", "coarse-i0"], window_s=50.0)
+    write_consistency_report(two, out)
+    assert set(json.loads((out / "consistency.json").read_text())["methods"]) == {"coarse", "coarse-i0"}
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+@pytest.mark.parametrize("files", [
+    {"notes.txt": "mine"},
+    {"consistency.json": '{"kind": "consistency"}', "notes.txt": "mine"},  # an output, and a file of mine
+    {"consistency.json": '{"kind": "identify"}'},
+    {"identify.json": '{"record": {}, "method": {}, "spec": {}}'},  # the other command's
+    {"metrics.json": '{"scenario": "s", "methods": {}}'},  # a run's report
+])
+def test_a_folder_of_other_files_is_refused_and_untouched(record, tmp_path, files):
+    res = consistency(record, SITE, ["coarse"], window_s=50.0)
+    out = tmp_path / "mine"
+    out.mkdir()
+    for name, text in files.items():
+        (out / name).write_text(text)
+    before = _snapshot(out)
+    with pytest.raises(ValueError) as err:
+        write_consistency_report(res, out)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{out}: ") and "previous fusionbench consistency output" in msg
+    assert "found other files" in msg
+    assert _snapshot(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["mine"]

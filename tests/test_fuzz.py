@@ -1,6 +1,7 @@
 """Property tests of the boundary (issue 14): whatever a file or a scenario mapping holds, the readers and the
 scenario parser either return a valid result or raise their one-line error naming the file; never another
-exception, never a result with non-finite samples."""
+exception, never a result with non-finite samples. Whatever shapes the settling metrics are given, they return one
+value per history or one line naming the argument (issue 24)."""
 
 import io
 import os
@@ -12,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fusionbench import scenarios
+from fusionbench import metrics, scenarios
 from fusionbench.imufiles import IMUFileError, read_imu
 
 #: Examples per property (FUZZ_EXAMPLES=2000 for a deeper search than the suite's).
@@ -132,3 +133,30 @@ def test_an_empty_or_one_sample_file_is_refused(tmp_path, n):
     p.write_text("t,gx,gy,gz,ax,ay,az\n" + "0.01,0,0,0,0,0,9.8\n" * n)
     with pytest.raises(IMUFileError, match="short.csv"):
         read_imu(p)
+
+
+_shape = st.lists(st.integers(0, 4), min_size=0, max_size=3).map(tuple)
+
+
+def _fits(shape, onto):
+    """Whether an array of ``shape`` broadcasts to ``onto`` without widening it."""
+    return len(shape) <= len(onto) and all(a in (1, b) for a, b in zip(shape[::-1], onto[::-1]))
+
+
+@SETTINGS
+@given(_shape, _shape, _shape, _shape)
+def test_any_settling_shapes_give_one_value_per_history_or_one_line(t_shape, x_shape, band_shape, target_shape):
+    t, x = np.arange(np.prod(t_shape, dtype=int), dtype=float).reshape(t_shape), np.zeros(x_shape)
+    band, target = np.ones(band_shape), np.zeros(target_shape)
+    histories = len(x_shape) >= 1 and x_shape[-1] >= 1 and _fits(band_shape, x_shape) and _fits(target_shape, x_shape)
+    for call, args, ok in ((metrics.settling_time, (t, x, band, target), histories and t_shape == x_shape[-1:]),
+                           (metrics.settled, (x, band, target), histories)):
+        try:
+            out = call(*args)
+        except ValueError as exc:
+            msg = str(exc)
+            field = msg.split(":")[0]
+            assert not ok and "\n" not in msg and "expected" in msg and "found shape" in msg, msg
+            assert field in {f"{call.__name__} {a}" for a in ("t", "x", "band", "target")}, msg
+            continue
+        assert ok and np.shape(out) == x_shape[:-1], (call.__name__, t_shape, x_shape, np.shape(out))

@@ -65,3 +65,37 @@ def test_misalignment_history_shape_and_units():
     phi = metrics.misalignment_history(est, C)
     assert phi.shape == (1, 4, 3)
     assert phi[0, :, 0] / units.ARCMIN == pytest.approx(np.ones(4), rel=1e-12)
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: metrics.settling_time(np.arange(5.0), np.zeros(3), 1.0),
+     ["settling_time x:", "expected error histories of shape (..., 5)", "found shape (3,)"]),
+    (lambda: metrics.settling_time(np.arange(5.0), np.zeros((5, 3)), 1.0),  # histories along the wrong axis
+     ["settling_time x:", "shape (..., 5)", "found shape (5, 3)"]),
+    (lambda: metrics.settling_time(np.arange(10.0).reshape(2, 5), np.zeros(5), 1.0),
+     ["settling_time t:", "expected a 1-D array of times", "found shape (2, 5)"]),
+    (lambda: metrics.settling_time([], np.zeros(0), 1.0), ["settling_time x:", "M >= 1", "found shape (0,)"]),
+    (lambda: metrics.settling_time(np.arange(5.0), 0.0, 1.0), ["settling_time x:", "found shape ()"]),
+    (lambda: metrics.settling_time(np.arange(5.0), np.zeros((2, 5)), 1.0, np.zeros(4)),
+     ["settling_time target:", "broadcastable to x's shape (2, 5)", "found shape (4,)"]),
+    (lambda: metrics.settling_time(np.arange(5.0), np.zeros(5), 1.0, np.zeros((3, 5))),  # would widen x
+     ["settling_time target:", "x's shape (5,)", "found shape (3, 5)"]),
+    (lambda: metrics.settling_time(np.arange(5.0), np.zeros((2, 5)), np.ones(2)),
+     ["settling_time band:", "x's shape (2, 5)", "found shape (2,)"]),
+    (lambda: metrics.settled(np.zeros((2, 5)), 1.0, np.zeros(3)),
+     ["settled target:", "x's shape (2, 5)", "found shape (3,)"]),
+    (lambda: metrics.settled(np.zeros((2, 0)), 1.0), ["settled x:", "M >= 1", "found shape (2, 0)"]),
+])
+def test_mismatched_settling_shapes_are_one_line_naming_the_argument(call, words):
+    with pytest.raises(ValueError) as err:
+        call()
+    msg = str(err.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+def test_settling_shapes_that_match_still_broadcast():
+    t = np.arange(5.0)
+    x = np.zeros((2, 3, 5))
+    assert metrics.settling_time(t, x, 1.0, np.zeros(5)).shape == (2, 3)
+    assert metrics.settling_time(t, x, np.ones((3, 1)), np.zeros((2, 1, 5))).shape == (2, 3)
+    assert metrics.settled(x, 1.0, np.zeros(5)).shape == (2, 3) and metrics.settled(x[0, 0], 1.0).shape == ()
