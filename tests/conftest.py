@@ -19,16 +19,43 @@ def load_fixture(stem):
     return d[:, 0], d[:, 1:4], d[:, 4:7], meta
 
 
-def engines_agree(a, b):
-    """Two AlignmentResults of the same method and data under its two engines agree: the same times, and the
-    attitudes and every series (``extra``, ``series``) within 1e-12 of the series' own size, NaN where the other has
-    NaN (the engines do the same operations in the same order: bit-identical on the x86-64 AVX2 machine they were
-    written on; another CPU's vector width may change NumPy's einsum sums in the last bit)."""
+#: The rounding unit of a double, 2.2e-16: two floating-point paths that round differently differ by multiples of it.
+EPS = np.finfo(float).eps
+
+
+def agree_to_rounding(x, y, roundings, scale=None):
+    """``x`` and ``y``, one quantity computed along two floating-point paths, agree to rounding: the same shape and
+    NaNs, and ``|x - y| <= roundings * EPS * scale`` wherever both are finite.
+
+    ``roundings`` bounds the number of roundings by which the paths may differ (terms summed in another order, steps
+    that carry each difference on, the computation's conditioning), and ``scale`` is the size a rounding is relative
+    to (default: the quantity's own, ``max |y|``; an array broadcast against ``y`` gives each element its own): each
+    caller derives both beside its call. Returns the largest difference in units of ``EPS * scale``.
+
+    The tolerance must stay far below a real difference: a series shifted by one step or sample moves by 1e-2 to 2 of
+    its size, so a tolerance above 1e-5 of the quantity's size (three orders below that) is refused as a derivation
+    gone wrong, not a bound."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    assert x.shape == y.shape and np.array_equal(np.isnan(x), np.isnan(y)), "shapes or NaNs differ"
+    size = np.nanmax(np.abs(y), initial=0.0)
+    scale = np.broadcast_to(size if scale is None else np.asarray(scale, dtype=float), y.shape)
+    tol = roundings * EPS * scale
+    assert np.nanmax(tol, initial=0.0) <= 1e-5 * size, \
+        f"tolerance {np.nanmax(tol):.3g} above 1e-5 of the quantity's size {size:.3g}"
+    diff = np.abs(x - y)
+    worst = np.nanmax(np.where(diff > tol, diff / np.maximum(tol, np.finfo(float).tiny), 0.0), initial=0.0)
+    assert worst == 0.0, f"differ by up to {worst:.3g} times the tolerance ({roundings:.3g} roundings)"
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return float(np.nanmax(np.where(scale > 0, diff / (EPS * scale), 0.0), initial=0.0))
+
+
+def engines_agree(a, b, roundings):
+    """Two AlignmentResults of the same method and data under its two engines agree (:func:`agree_to_rounding`): the
+    same times and series names, and the attitudes and every series (``extra``, ``series``) within ``roundings``
+    roundings of the series' own size."""
     assert np.array_equal(a.t, b.t)
     assert sorted(a.extra) == sorted(b.extra) and sorted(a.series) == sorted(b.series)
     pairs = [(a.C_bn, b.C_bn)] + [(a.extra[k], b.extra[k]) for k in a.extra] + [(a.series[k], b.series[k])
                                                                              for k in a.series]
     for x, y in pairs:
-        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-        assert x.shape == y.shape and np.array_equal(np.isnan(x), np.isnan(y))
-        assert np.nanmax(np.abs(x - y), initial=0.0) <= 1e-12 * np.nanmax(np.abs(y), initial=0.0)
+        agree_to_rounding(x, y, roundings)
