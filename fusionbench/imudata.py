@@ -12,7 +12,9 @@ Samples come in one of two kinds:
     consecutive samples with the trapezoid rule, so the initial state belongs to ``t[0]``.
 
 Arrays are body frame RFU (x right, y forward, z up), shape ``(runs, samples, 3)``; a single
-recording has ``runs = 1``.
+recording has ``runs = 1``. The times are one uniform grid (to :data:`STEP_TOLERANCE`) for every
+method: samples at jittered times go through :func:`fusionbench.resample.uniform_imu` first (the
+file readers do it), which reads them at their actual times and puts them on a uniform grid.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ KINDS = ("increment", "rate")
 MAX_RATE_RADPS = 100.0
 #: Largest specific force a navigation IMU measures, m/s^2 (50 g).
 MAX_SPECIFIC_FORCE_MPS2 = 50 * 9.80665
-#: Relative tolerance on the uniformity of the time step.
+#: Relative tolerance on the uniformity of the time step (times within it are uniform; the readers resample others).
 STEP_TOLERANCE = 1e-3
 
 
@@ -47,7 +49,8 @@ def time_defect(t):
     if bad.size:
         k = int(bad[0]) + 1
         return k, "non-uniform time step", (f"step {step[k - 1]:.10g} s, median step {med:.10g} s (relative "
-                                            f"tolerance {STEP_TOLERANCE:g})")
+                                            f"tolerance {STEP_TOLERANCE:g}; fusionbench.resample.uniform_imu puts "
+                                            f"jittered times on a uniform grid)")
     return None
 
 

@@ -1,4 +1,5 @@
-"""IMU file readers and writers with validation: CSV, NPZ and the PSINS ``.imu`` layout.
+"""IMU file readers with validation: CSV, NPZ and the PSINS ``.imu`` layout (the writers, re-exported here, are in
+:mod:`fusionbench.imuwriters`).
 
 Conventions (see the contract): body frame b is Right-Front-Up (x right, y forward, z up);
 navigation frame n is East-North-Up; Euler angles are ``[pitch, roll, yaw]`` (rad) with
@@ -21,26 +22,32 @@ PSINS ``.imu``
     jitter: each header row ends with a 0, and each sample row with the integer time dither in
     microseconds; sample k is then at ``t0 + (k + 1) dt + 1e-6 * (dither_0 + ... + dither_k)``.
 
-Problems with a file raise :class:`IMUFileError` (one line). Writers are atomic.
+Times (all formats)
+    Uniform (to 1e-3 of the step), the samples are read as they are. Times that jitter (every step
+    within 0.5 to 1.5 nominal steps) are read at their actual times and put on a uniform grid of
+    the same span, kind "increment" (:mod:`fusionbench.resample`: the scheme, its error bound and
+    the limits). A duplicate time, a reversal, a gap (a step of 1.5 nominal steps or more: a sample
+    or more missing) or too short a step is refused, naming the row.
+
+Paths are a str, a bytes path or an ``os.PathLike``. Problems with a file raise :class:`IMUFileError`
+(one line). Writers are atomic.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
-import uuid
 from pathlib import Path
 
 import numpy as np
 
-from .imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, IMUData, sample_defect, time_defect
+from .imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, sample_defect
+from .imuwriters import CSV_COLUMNS, atomic_open, write_csv, write_npz, write_psins
+from .resample import intervals, timing_defect, uniform_imu
 from .units import ARCSEC, DEG
 
 __all__ = ["IMUFileError", "read_imu", "read_csv", "read_npz", "read_psins",
            "write_csv", "write_npz", "write_psins", "atomic_open", "CSV_COLUMNS", "EXTENSIONS"]
 
-#: Required CSV columns, in the order the writer uses.
-CSV_COLUMNS = ("t", "gx", "gy", "gz", "ax", "ay", "az")
 #: Accepted file extensions.
 EXTENSIONS = (".csv", ".npz", ".imu")
 _HINT = "expected header " + ",".join(CSV_COLUMNS)
@@ -59,6 +66,16 @@ class IMUFileError(ValueError):
         self.path = os.fspath(path)
         self.problem = " ".join(str(problem).split())
         super().__init__(f"{self.path}: {self.problem}")
+
+
+def _fspath(path):
+    """``path`` as a str: a str, a bytes path (decoded as the file system does) or an ``os.PathLike``; anything else
+    is a one-line TypeError."""
+    try:
+        return os.fsdecode(path)
+    except TypeError:
+        raise TypeError(f"IMU file path: expected a str, bytes or os.PathLike, found {type(path).__name__} "
+                        f"{_cell(repr(path))}") from None
 
 
 def _cell(s, limit=40):
@@ -99,27 +116,39 @@ def _too_short(path, n, min_samples):
         raise IMUFileError(path, f"too short: {n} samples, the method needs at least {need}")
 
 
-def _check_samples(path, t, gyro, accel, min_samples, where, scale=1.0):
-    """Finite values within an IMU's range, enough samples, strictly increasing and uniform time; ``where(k)``
-    names row k; ``scale`` turns a sample into a rate (the interval of an increment, 1 for rates)."""
-    bad = time_defect(t)
+def _check_samples(path, t, gyro, accel, min_samples, where, kind="rate", t_start=None):
+    """Finite values within an IMU's range, enough samples, and times that are uniform or jitter (no duplicate,
+    reversal, gap or too short a step: :func:`fusionbench.resample.timing_defect`); ``where(k)`` names row k; an
+    increment is checked as a rate over its interval (the first from ``t_start``)."""
+    bad = timing_defect(t, t_start)
     if bad and not np.isfinite(t[bad[0]]):  # a non-finite time first, like a non-finite sample
         raise IMUFileError(path, f"{bad[1]} at {where(bad[0])}, column 't'")
+    scale = _per_row(intervals(t, t_start)) if kind == "increment" else 1.0
     for key, arr, limit, unit in (("g", gyro, MAX_RATE_RADPS, "rad/s"), ("a", accel, MAX_SPECIFIC_FORCE_MPS2, "m/s^2")):
         found = sample_defect(arr[None] / scale, limit, unit)
         if found:
             (_, k, axis), text = found
             raise IMUFileError(path, f"{text} at {where(k)}, column '{key}{axis}'"
-                                     + (" (an increment over its interval, as a rate)" if scale != 1.0 else ""))
+                                     + (" (an increment over its interval, as a rate)" if kind == "increment" else ""))
     _too_short(path, t.size, min_samples)
     if bad:
         k, what, detail = bad
-        raise IMUFileError(path, f"{what} at {where(k)}: {detail}")
+        raise IMUFileError(path, f"{what} at {where(k)}" + (f": {detail}" if detail else ""))
 
 
-def _rate_result(path, fmt, t, gyro, accel):
-    imu = IMUData(t, gyro[None], accel[None], kind="rate")
-    return imu, {"path": os.fspath(path), "format": fmt, "samples": imu.samples, "dt": imu.dt}
+def _per_row(scale):
+    """Row intervals (N,) as a divisor of (runs, N, 3) samples; a scalar as it is."""
+    scale = np.asarray(scale, dtype=float)
+    return scale[:, None] if scale.ndim else float(scale)
+
+
+def _result(path, fmt, t, gyro, accel, kind="rate", t_start=None):
+    """The checked samples as one run on a uniform grid (:func:`fusionbench.resample.uniform_imu`) and their meta."""
+    try:
+        imu, info = uniform_imu(t, gyro, accel, kind, t_start)
+    except ValueError as e:  # what the container refuses after the checks above: one line, naming the file
+        raise IMUFileError(path, str(e)) from None
+    return imu, {"path": os.fspath(path), "format": fmt, "samples": imu.samples, "dt": imu.dt, **info}
 
 
 def read_csv(path, min_samples=2):
@@ -127,7 +156,7 @@ def read_csv(path, min_samples=2):
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, bytes or path-like
         Columns t (s), gx, gy, gz (rad/s), ax, ay, az (m/s^2), body frame RFU.
     min_samples : int
         Fewest samples accepted (at least 2).
@@ -135,10 +164,12 @@ def read_csv(path, min_samples=2):
     Returns
     -------
     imu : IMUData
-        ``kind="rate"``, one run.
+        ``kind="rate"``, one run; ``kind="increment"`` on a uniform grid when the times jitter
+        (module docstring).
     meta : dict
-        ``path``, ``format`` ("csv"), ``samples``, ``dt`` (s).
+        ``path``, ``format`` ("csv"), ``samples``, ``dt`` (s), ``resampled``, ``jitter_s``, ``resampling_c_s2``.
     """
+    path = _fspath(path)
     lines = _lines(path, "#")
     if not lines:
         raise IMUFileError(path, f"no header line found ({_HINT})")
@@ -167,7 +198,7 @@ def read_csv(path, min_samples=2):
     gyro = np.column_stack([cols[c] for c in ("gx", "gy", "gz")]).reshape(-1, 3)
     accel = np.column_stack([cols[c] for c in ("ax", "ay", "az")]).reshape(-1, 3)
     _check_samples(path, t, gyro, accel, min_samples, lambda k: f"row {k} (line {rows[k][0]})")
-    return _rate_result(path, "csv", t, gyro, accel)
+    return _result(path, "csv", t, gyro, accel)
 
 
 def read_npz(path, min_samples=2):
@@ -175,7 +206,7 @@ def read_npz(path, min_samples=2):
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, bytes or path-like
         Arrays ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s^2, body frame RFU.
     min_samples : int
         Fewest samples accepted (at least 2).
@@ -183,10 +214,12 @@ def read_npz(path, min_samples=2):
     Returns
     -------
     imu : IMUData
-        ``kind="rate"``, one run.
+        ``kind="rate"``, one run; ``kind="increment"`` on a uniform grid when the times jitter
+        (module docstring).
     meta : dict
-        ``path``, ``format`` ("npz"), ``samples``, ``dt`` (s).
+        ``path``, ``format`` ("npz"), ``samples``, ``dt`` (s), ``resampled``, ``jitter_s``, ``resampling_c_s2``.
     """
+    path = _fspath(path)
     arrays = {}
     try:
         z = np.load(path, allow_pickle=False)
@@ -220,7 +253,7 @@ def read_npz(path, min_samples=2):
             raise IMUFileError(path, f"array '{name}' has shape {arrays[name].shape}, expected ({n}, 3)")
     t, gyro, accel = (np.asarray(arrays[k], dtype=float) for k in ("t", "gyro", "accel"))
     _check_samples(path, t, gyro, accel, min_samples, lambda k: f"index {k}")
-    return _rate_result(path, "npz", t, gyro, accel)
+    return _result(path, "npz", t, gyro, accel)
 
 
 def read_psins(path, min_samples=2):
@@ -228,7 +261,7 @@ def read_psins(path, min_samples=2):
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, bytes or path-like
         The file; body frame x right, y forward, z up.
     min_samples : int
         Fewest samples accepted (at least 2).
@@ -238,13 +271,17 @@ def read_psins(path, min_samples=2):
     imu : IMUData
         ``kind="increment"``, one run: ``t = t0 + (k + 1) dt`` s for row k; ``gyro`` =
         ``counts * scale * arcsec`` (rad); ``accel`` = ``counts * scale * 1e-6 * g`` (m/s).
-        In the 7-column variant the time dither (us) summed up to row k is added to its ``t``; the
-        times must still be uniform to :data:`fusionbench.imudata.STEP_TOLERANCE`.
+        In the 7-column variant the time dither (us) summed up to row k is added to its ``t``; times
+        that jitter beyond :data:`fusionbench.imudata.STEP_TOLERANCE` are resampled onto the uniform
+        grid from t0 to the last time (:func:`fusionbench.resample.uniform_imu`, the first interval
+        starting at t0).
     meta : dict
         ``path``, ``format`` ("psins"), ``attitude0`` [pitch, roll, yaw] rad, ``v0`` [VE, VN, VU]
         m/s, ``lat``, ``lon`` rad, ``h`` m (the site of the recording), ``t0``, ``dt`` s, ``g``
-        m/s^2, ``gyro_scale_arcsec``, ``accel_scale_ugs`` (3 each), ``samples``, ``columns`` (6 or 7).
+        m/s^2, ``gyro_scale_arcsec``, ``accel_scale_ugs`` (3 each), ``samples``, ``columns`` (6 or 7),
+        ``resampled``, ``jitter_s``, ``resampling_c_s2`` (:func:`fusionbench.resample.uniform_imu`).
     """
+    path = _fspath(path)
     lines = _lines(path, "%")
     if len(lines) < 3:
         raise IMUFileError(path, f"expected 3 header rows after the '%' comments, found {len(lines)}")
@@ -289,13 +326,13 @@ def read_psins(path, min_samples=2):
     gyro = counts[:, :3] * (h[12:15] * ARCSEC)
     accel = counts[:, 3:6] * (h[15:18] * 1e-6 * g)
     _check_samples(path, t, gyro, accel, min_samples, lambda k: f"sample row {k} (line {rows[k][0]})"
-                   + (" (time from t0, dt and the dither column)" * (width == 7)), scale=dt)
+                   + (" (time from t0, dt and the dither column)" * (width == 7)), kind="increment", t_start=h[9])
+    imu, meta = _result(path, "psins", t, gyro, accel, "increment", t_start=h[9])
     h = h.tolist()
-    meta = {"path": os.fspath(path), "format": "psins", "attitude0": [a * DEG for a in h[0:3]],
-            "v0": h[3:6], "lat": h[6] * DEG, "lon": h[7] * DEG, "h": h[8], "t0": h[9], "dt": dt,
-            "g": g, "gyro_scale_arcsec": h[12:15], "accel_scale_ugs": h[15:18], "samples": len(t),
-            "columns": width}
-    return IMUData(t, gyro[None], accel[None], kind="increment"), meta
+    meta.update({"attitude0": [a * DEG for a in h[0:3]], "v0": h[3:6], "lat": h[6] * DEG, "lon": h[7] * DEG,
+                 "h": h[8], "t0": h[9], "dt": dt, "g": g, "gyro_scale_arcsec": h[12:15],
+                 "accel_scale_ugs": h[15:18], "columns": width})
+    return imu, meta
 
 
 _READERS = {".csv": read_csv, ".npz": read_npz, ".imu": read_psins}
@@ -306,7 +343,7 @@ def read_imu(path, min_samples=2):
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, bytes or path-like
         See :func:`read_csv`, :func:`read_npz`, :func:`read_psins`.
     min_samples : int
         Fewest samples the caller (e.g. an alignment method) needs.
@@ -314,156 +351,25 @@ def read_imu(path, min_samples=2):
     Returns
     -------
     imu : IMUData
-        One run, body RFU: kind "rate" (CSV, NPZ: rad/s, m/s^2) or "increment" (.imu: rad, m/s).
+        One run, body RFU: kind "rate" (CSV, NPZ: rad/s, m/s^2) or "increment" (.imu: rad, m/s);
+        "increment" on a uniform grid for any file whose times jitter (module docstring).
     meta : dict
-        At least ``path`` and ``format``; for .imu also the header (``attitude0`` rad, ``v0``
-        m/s, ``lat``, ``lon`` rad, ``h`` m, ``t0``, ``dt`` s, ``g`` m/s^2).
+        At least ``path`` (a str), ``format``, ``samples``, ``dt`` s, ``resampled``, ``jitter_s``
+        s and ``resampling_c_s2`` s^2; for .imu also the header (``attitude0`` rad, ``v0`` m/s,
+        ``lat``, ``lon`` rad, ``h`` m, ``t0``, ``dt`` s, ``g`` m/s^2).
 
     Raises
     ------
     IMUFileError
         Unknown extension, unreadable file, missing column/array, bad field count, non-numeric
-        or non-finite value, wrong shape, too few samples, non-increasing or non-uniform time,
-        malformed PSINS header or data row.
+        or non-finite value, wrong shape, too few samples, a duplicate time, a reversal, a gap or
+        too short a time step, malformed PSINS header or data row.
+    TypeError
+        A path that is not a str, bytes or os.PathLike (one line).
     """
+    path = _fspath(path)
     ext = Path(path).suffix.lower()
     if ext not in _READERS:
         raise IMUFileError(path, f"unknown file extension '{ext or '(none)'}' "
                                  f"(accepted: {', '.join(EXTENSIONS)})")
     return _READERS[ext](path, min_samples=min_samples)
-
-
-@contextlib.contextmanager
-def atomic_open(path, binary=False):
-    """Yield a temporary file next to ``path``; on success ``os.replace`` it onto ``path``."""
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise FileNotFoundError(f"{path}: cannot write it: its folder {path.parent} does not exist")
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # mode honours the umask
-    try:
-        with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="\n")) as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
-def _rate_arrays(imu, run):
-    """Times (s), angular rate (rad/s), specific force (m/s^2) of one run, checked finite."""
-    if imu.kind == "rate":
-        t, gyro, accel = imu.t, imu.gyro[run], imu.accel[run]
-    else:  # the average rate over (t - dt, t] belongs to the interval's midpoint
-        t, gyro, accel = imu.t - 0.5 * imu.dt, imu.gyro[run] / imu.dt, imu.accel[run] / imu.dt
-    if not (np.isfinite(t).all() and np.isfinite(gyro).all() and np.isfinite(accel).all()):
-        raise ValueError(f"run {run} holds non-finite values; nothing written")
-    return t, gyro, accel
-
-
-def write_csv(path, imu, run=0):
-    """Write one run as a CSV IMU log, atomically; returns the path.
-
-    Parameters
-    ----------
-    path : str or path-like
-        Target file, replaced only once completely written.
-    imu : IMUData
-        Kind "rate" is written as it is; kind "increment" as average rates ``increment / dt``
-        at the interval midpoints ``t - dt/2``. Columns ``t,gx,gy,gz,ax,ay,az`` in s, rad/s,
-        m/s^2, body frame RFU, ``%.17g`` so reading back gives the same floats.
-    run : int
-        Which recording of the batch.
-    """
-    t, gyro, accel = _rate_arrays(imu, run)
-    with atomic_open(path) as f:
-        f.write(",".join(CSV_COLUMNS) + "\n")
-        np.savetxt(f, np.column_stack([t, gyro, accel]), fmt="%.17g", delimiter=",")
-    return Path(path)
-
-
-def write_npz(path, imu, run=0):
-    """Write one run as an NPZ archive, atomically; returns the path.
-
-    Parameters
-    ----------
-    path : str or path-like
-        Target file (no ``.npz`` is appended).
-    imu : IMUData
-        As in :func:`write_csv`: ``t`` (N,) s, ``gyro`` (N, 3) rad/s, ``accel`` (N, 3) m/s^2, RFU.
-    run : int
-        Which recording of the batch.
-    """
-    t, gyro, accel = _rate_arrays(imu, run)
-    with atomic_open(path, binary=True) as f:
-        np.savez(f, t=t, gyro=gyro, accel=accel)
-    return Path(path)
-
-
-def write_psins(path, imu, attitude0, v0=(0.0, 0.0, 0.0), *, lat, lon=0.0, h=0.0, g=9.780325,
-                gyro_scale_arcsec=0.01, accel_scale_ugs=10.0, run=0):
-    """Write one run as a PSINS-layout ``.imu`` file of integer counts, atomically.
-
-    Parameters
-    ----------
-    path : str or path-like
-        Target file.
-    imu : IMUData
-        Increments (rad, m/s, body RFU) as they are; rates are integrated first by
-        :meth:`IMUData.increments` (trapezoid), so the initial state belongs to ``t[0]``.
-    attitude0, v0 : sequence of 3 float
-        Initial ``[pitch, roll, yaw]`` (rad, written in deg) and ``[VE, VN, VU]`` (m/s).
-    lat, lon, h : float
-        Latitude, longitude (rad, written in deg) and height (m).
-    g : float
-        Header gravity, m/s^2: an accelerometer count is ``accel_scale_ugs * 1e-6 * g`` m/s.
-    gyro_scale_arcsec, accel_scale_ugs : float or sequence of 3
-        Count sizes: arcsec per gyro count, ug*s per accelerometer count.
-    run : int
-        Which recording of the batch.
-
-    Notes
-    -----
-    Quantisation carries each sample's fractional remainder into the next, so every cumulative
-    sum of the counts stays within half a count of the exact one.
-    """
-    def vec3(name, v):  # what read_psins will ask of the header, asked before anything is written
-        a = np.asarray(v, dtype=float)
-        if a.shape != (3,) or not np.isfinite(a).all():
-            raise ValueError(f"write_psins {name}: expected 3 finite numbers, found {v!r}")
-        return a
-
-    attitude0, v0 = vec3("attitude0", attitude0), vec3("v0", v0)
-    for name, value, lo, hi in (("lat", lat, -np.pi / 2, np.pi / 2), ("lon", lon, -2 * np.pi, 2 * np.pi),
-                                ("h", h, -1e4, 1e5), ("g", g, 1.0, 20.0)):
-        if not (np.isfinite(value) and lo <= value <= hi):
-            raise ValueError(f"write_psins {name}: expected a finite number in [{lo:g}, {hi:g}], found {value!r}")
-    if not (isinstance(run, (int, np.integer)) and 0 <= run < imu.runs):
-        raise ValueError(f"write_psins run: expected a recording index in [0, {imu.runs - 1}], found {run!r}")
-    t_end, dth, dv = imu.increments()
-    dt = float((t_end[-1] - t_end[0]) / (t_end.size - 1)) if t_end.size > 1 else imu.dt
-    gs = np.broadcast_to(np.asarray(gyro_scale_arcsec, dtype=float), (3,))
-    acs = np.broadcast_to(np.asarray(accel_scale_ugs, dtype=float), (3,))
-    if not (np.all(gs > 0) and np.all(acs > 0)):
-        raise ValueError(f"write_psins gyro_scale_arcsec, accel_scale_ugs: expected positive count sizes, found "
-                         f"{gyro_scale_arcsec!r}, {accel_scale_ugs!r}")
-    x = np.column_stack([dth[run] / (gs * ARCSEC), dv[run] / (acs * 1e-6 * g)])
-    if not np.isfinite(x).all() or np.abs(x).sum(axis=0).max() > 2.0 ** 62:
-        raise ValueError(f"run {run} holds non-finite or out-of-range values; nothing written")
-    # Residual carry (counts[k] = round(x[k] + remainder[k-1])) = differences of rounded cumsums.
-    cum = np.rint(np.cumsum(x, axis=0)).astype(np.int64)
-    counts = np.diff(cum, axis=0, prepend=np.zeros((1, 6), dtype=np.int64))
-    rows = [[*(attitude0 / DEG), *v0],
-            [lat / DEG, lon / DEG, h, t_end[0] - dt, dt * 1e3, g], [*gs, *acs]]
-    with atomic_open(path) as f:
-        f.write("% PSINS-format SIMU log file written by fusionbench.\n"
-                "% 1st: [pitch0 roll0 yaw0 (deg) VE0 VN0 VU0 (m/s)]\n"
-                "% 2nd: [lat0 lon0 (deg) h0 (m) t0 (s) sampling interval (ms) g (m/s^2)]\n"
-                "% 3rd: [gyro scale (arcsec/count) x3, accel scale (ug*s/count) x3]\n\n")
-        for r in rows:
-            f.write(" ".join("%.17g" % v for v in r) + "\n")
-        np.savetxt(f, counts, fmt="%d", delimiter=" ")
-    return Path(path)

@@ -11,19 +11,20 @@ z up), with the validation and one-line :class:`~fusionbench.imufiles.IMUFileErr
     imu, meta = read_layout(path, layout_from_name_or_file("kf-gins"))   # or a .toml format file
 
 Increments: the row at time t holds the angle and velocity increments over ``(t - dt, t]`` (the convention of
-fusionbench and KF-GINS), so the initial state belongs to ``t[0] - dt``.
+fusionbench and KF-GINS), so the initial state belongs to ``t[0] - dt``. Times that jitter are read at their actual
+times and put on a uniform grid, as by :mod:`fusionbench.imufiles` (:mod:`fusionbench.resample`); a duplicate time,
+a reversal, a gap or too short a step is refused, naming the row.
 """
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from .imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, IMUData, sample_defect
-from .imufiles import IMUFileError, _cell, _check_samples, _is_number, _lines, _rate_result, _too_short
+from .imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, sample_defect
+from .imufiles import IMUFileError, _cell, _check_samples, _fspath, _is_number, _lines, _per_row, _result, _too_short
 from .layout_format import (ACCEL_UNITS, AXES, BUILTIN_LAYOUTS, DELIMITERS, GYRO_UNITS, LAYOUT_KEYS, ROLES,
                             TIME_UNITS, Layout, layout_from_name_or_file, load_layout)
+from .resample import intervals
 
 __all__ = ["read_layout", "Layout", "load_layout", "layout_from_name_or_file", "BUILTIN_LAYOUTS", "LAYOUT_KEYS",
            "AXES", "ROLES", "DELIMITERS", "TIME_UNITS", "GYRO_UNITS", "ACCEL_UNITS"]
@@ -75,7 +76,7 @@ def read_layout(path, layout, min_samples=2):
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, bytes or path-like
         The log.
     layout : Layout or str
         A :class:`Layout`, a built-in name or a ``.toml`` format file (:func:`layout_from_name_or_file`).
@@ -86,18 +87,22 @@ def read_layout(path, layout, min_samples=2):
     -------
     imu : IMUData
         One run, SI, body RFU: ``kind="rate"`` (rad/s, m/s^2 at ``t``) or ``"increment"`` (rad, m/s over
-        ``(t - dt, t]``); ``t`` in s as in the file (times scaled by ``time_unit``, not shifted).
+        ``(t - dt, t]``); ``t`` in s as in the file (times scaled by ``time_unit``, not shifted). Times that jitter:
+        ``kind="increment"`` on the uniform grid from the first to the last time (an increment file's first interval
+        one mean step long), :func:`fusionbench.resample.uniform_imu`.
     meta : dict
-        ``path``, ``format`` (the layout's name), ``samples``, ``dt`` (s), ``kind``, ``axes``, ``skipped_rows``.
+        ``path``, ``format`` (the layout's name), ``samples``, ``dt`` (s), ``resampled``, ``jitter_s`` (s),
+        ``resampling_c_s2`` (s^2), ``kind`` (the file's), ``axes``, ``skipped_rows``.
 
     Raises
     ------
     IMUFileError
         One line naming the file and, where it applies, the row, line and column: no header, a column name
         missing or repeated in the header, a column index beyond the fields of a row, a row with another number
-        of fields, a non-numeric, non-finite or out-of-range value, too few samples, non-increasing or
-        non-uniform time.
+        of fields, a non-numeric, non-finite or out-of-range value, too few samples, a duplicate time, a reversal,
+        a gap or too short a time step.
     """
+    path = _fspath(path)
     layout = layout_from_name_or_file(layout)
     lines = _lines(path, layout.comment or ())
     names = None
@@ -137,15 +142,10 @@ def read_layout(path, layout, min_samples=2):
     t = data[:, 0] * TIME_UNITS[layout.time_unit]
     gyro = data[:, 1:4] * GYRO_UNITS[layout.kind][layout.gyro_unit]
     accel = data[:, 4:7] * ACCEL_UNITS[layout.kind][layout.accel_unit]
-    dt = (t[-1] - t[0]) / (t.size - 1) if t.size > 1 else 0.0
-    scale = dt if layout.kind == "increment" and np.isfinite(dt) and dt > 0 else 1.0
+    scale = _per_row(intervals(t)) if layout.kind == "increment" and t.size else 1.0
     _check_channels(path, layout, gyro, accel, where, scale)
     gyro, accel = gyro @ layout.matrix.T, accel @ layout.matrix.T
-    _check_samples(path, t, gyro, accel, min_samples, where, scale=scale)
-    if layout.kind == "rate":
-        imu, meta = _rate_result(path, layout.name, t, gyro, accel)
-    else:
-        imu = IMUData(t, gyro[None], accel[None], kind="increment")
-        meta = {"path": os.fspath(path), "format": layout.name, "samples": imu.samples, "dt": imu.dt}
+    _check_samples(path, t, gyro, accel, min_samples, where, kind=layout.kind)
+    imu, meta = _result(path, layout.name, t, gyro, accel, layout.kind)
     meta.update(kind=layout.kind, axes=layout.axes, skipped_rows=skip)
     return imu, meta

@@ -23,7 +23,8 @@ def _one_line(exc, *words):
 @pytest.mark.parametrize("field, t, gyro, accel, words", [
     ("t", T[::-1], GYRO, ACCEL, ["IMUData t", "not strictly increasing", "sample 1"]),
     ("t", np.r_[np.nan, T[1:]], GYRO, ACCEL, ["IMUData t", "non-finite", "sample 0"]),
-    ("t", np.r_[T[:100], T[100:] + 0.005], GYRO, ACCEL, ["IMUData t", "non-uniform time step", "sample 100"]),
+    ("t", np.r_[T[:100], T[100:] + 0.005], GYRO, ACCEL, ["IMUData t", "non-uniform time step", "sample 100",
+                                                        "fusionbench.resample.uniform_imu"]),
     ("gyro", T, GYRO + 1j, ACCEL, ["IMUData gyro", "expected real numbers", "complex"]),
     ("gyro", T, np.where(np.arange(N)[:, None] == 7, np.nan, GYRO), ACCEL, ["IMUData gyro", "non-finite", "sample 7"]),
     ("gyro", T, GYRO + 1e6, ACCEL, ["IMUData gyro", f"beyond the {MAX_RATE_RADPS:g} rad/s", "sample 0, axis x"]),
@@ -90,6 +91,44 @@ def test_writers_refuse_what_their_reader_would_refuse(tmp_path):
         write_npz(tmp_path / "no" / "x.npz", data)
     _one_line(exc, str(tmp_path / "no" / "x.npz"), "folder", "does not exist")
     assert ".tmp" not in str(exc.value)
+
+
+#: Jittered stamps (5 % of the 10 ms step) with one defect at sample 40: (the defect, its time, what the line says).
+_JIT = T + 0.0005 * np.sin(7.0 * np.arange(N))
+BAD_TIMES = [("gap", np.r_[_JIT[:40], _JIT[41:], _JIT[-1] + 0.01], ["gap in time", "about 1 sample(s) missing"]),
+             ("duplicate", np.r_[_JIT[:40], _JIT[39], _JIT[41:]], ["time not strictly increasing", "a duplicate"]),
+             ("reversal", np.r_[_JIT[:40], _JIT[39] - 0.002, _JIT[41:]], ["time not strictly increasing",
+                                                                            "a reversal"]),
+             ("short", np.r_[_JIT[:40], _JIT[39] + 0.002, _JIT[41:]], ["time step too short", "times the nominal step"])]
+
+
+@pytest.mark.parametrize("what, t, words", BAD_TIMES, ids=[b[0] for b in BAD_TIMES])
+@pytest.mark.parametrize("fmt", ["csv", "npz", "imu"])
+def test_a_gap_a_duplicate_or_a_reversal_is_one_line_naming_the_row(tmp_path, fmt, what, t, words):
+    """Jitter is read at the actual times; these are not. CSV rows and NPZ indices count from 0; a PSINS .imu
+    carries its times as the 7-column variant's dither (us) after t0 = 0 and dt = 10 ms."""
+    p = tmp_path / f"bad.{fmt}"
+    if fmt == "csv":
+        p.write_text("t,gx,gy,gz,ax,ay,az\n" + "".join(f"{v:.17g},1e-5,2e-5,3e-5,0,0,9.8\n" for v in t))
+        where = "row 40 (line 42)"
+    elif fmt == "npz":
+        np.savez(p, t=t, gyro=GYRO, accel=ACCEL)
+        where = "index 40"
+    else:
+        dither = np.diff(np.rint((t - T) * 1e6).astype(int), prepend=0)
+        head = "0 0 0 0 0 0 0\n34 108 0 0 10 9.78 0\n0.01 0.01 0.01 10 10 10 0\n"
+        p.write_text(head + "".join(f"1 2 3 0 0 9800 {d}\n" for d in dither))
+        where = "sample row 40 (line 44) (time from t0, dt and the dither column)"
+    with pytest.raises(IMUFileError) as exc:
+        read_imu(p)
+    _one_line(exc, str(p), f"at {where}", *words)
+    good = {"csv": lambda: p.write_text("t,gx,gy,gz,ax,ay,az\n" + "".join(f"{v:.17g},1e-5,2e-5,3e-5,0,0,9.8\n"
+                                                                           for v in _JIT)),
+            "npz": lambda: np.savez(p, t=_JIT, gyro=GYRO, accel=ACCEL)}
+    if fmt in good:  # the same stamps without the defect: jitter, read onto a uniform grid
+        good[fmt]()
+        data, meta = read_imu(p)
+        assert meta["resampled"] and data.kind == "increment" and data.samples == N - 1
 
 
 @pytest.mark.parametrize("kwargs, words", [

@@ -173,12 +173,25 @@ def test_psins_seven_column_variant_reads_the_same_samples_and_the_dithered_time
     np.testing.assert_array_equal(zero.t, six.t)
 
 
-def test_psins_seven_column_variant_refuses_a_jitter_beyond_the_step_tolerance(tmp_path):
-    counts = np.tile([1, 2, 3, 4, 5, 2001], (6, 1))
+def test_psins_seven_column_jitter_is_resampled_and_a_gap_refused(tmp_path):
+    """Row 2 half a millisecond late (2.5 % of the 20 ms step), row 3 on time: the intervals are 20, 20, 20.5, 19.5,
+    20, 20 ms. On the grid from t0 the interval (40, 60] ms takes 20/20.5 of row 2's counts, (60, 80] the rest of
+    row 2 and all of row 3; the others are the rows as they are."""
+    counts = np.tile([1000, -2000, 300, 40, -50, 2001], (6, 1))
     head = [["0"] * 6, ["30", "120", "0", "0", "20", "9.78"], ["0.01"] * 3 + ["10"] * 3]
-    dither = np.array([0, 0, 500, 0, 0, 0])  # row 2 half a millisecond late: 2.5 % of the 20 ms step
-    msg = _assert_error(_psins7(tmp_path / "j.imu", counts, dither, head), ["non-uniform time step"])
-    assert "sample row 2 " in msg and "dither" in msg
+    imu, meta = read_imu(_psins7(tmp_path / "j.imu", counts, np.array([0, 0, 500, -500, 0, 0]), head))
+    assert meta["resampled"] and imu.kind == "increment" and imu.samples == 6
+    np.testing.assert_allclose(imu.t, 0.020 * np.arange(1, 7), rtol=0, atol=1e-12)
+    # the grid time 60 ms lies 20 ms into row 2's interval (40, 60.5]: c = (20 ms)(0.5 ms) / 2
+    assert meta["jitter_s"] == pytest.approx(500e-6, abs=1e-12)
+    assert meta["resampling_c_s2"] == pytest.approx(0.5 * 20e-3 * 0.5e-3, rel=1e-9)
+    share = np.array([1, 1, 20 / 20.5, 1 + 0.5 / 20.5, 1, 1])
+    q = np.r_[np.full(3, 0.01 * ARCSEC), np.full(3, 10e-6 * 9.78)]
+    np.testing.assert_allclose(np.column_stack([imu.gyro[0], imu.accel[0]]), share[:, None] * counts * q,
+                               rtol=1e-12, atol=1e-18)
+    dither = np.array([0, 0, 0, 20000, 0, 0])  # row 3 a whole step late: the sample before it missing
+    msg = _assert_error(_psins7(tmp_path / "g.imu", counts, dither, head), ["gap in time"])
+    assert "sample row 3 " in msg and "dither" in msg and "about 1 sample(s) missing" in msg
     rows = [" ".join(map(str, r)) for r in counts]
     msg = _assert_error(_imu_file(tmp_path, rows[:3] + ["1 2 3 4 5 2001 0"] + rows, name="m.imu"), ["fields"])
     assert "sample row 3" in msg and "expected 6" in msg
@@ -269,19 +282,38 @@ def test_decreasing_time(tmp_path):
     _assert_error(_csv(tmp_path, rows), ["not strictly increasing"])
 
 
-def test_non_uniform_time(tmp_path):
+@pytest.mark.parametrize("shift, words", [
+    (0.10, ["gap in time at row 12 (line 14)", "step 0.2 s", "about 1 sample(s) missing"]),
+    (0.20, ["gap in time at row 12 (line 14)", "step 0.3 s", "about 2 sample(s) missing"]),
+    (-0.06, ["time step too short at row 12 (line 14)", "step 0.04 s", "an extra sample"]),
+])
+def test_a_gap_or_a_short_step_is_refused_naming_its_row(tmp_path, shift, words):
     rows = _good_rows(20)
     for r in rows[12:]:
-        r[0] += 0.05
-    msg = _assert_error(_csv(tmp_path, rows), ["non-uniform"])
-    assert "row 12" in msg and "0.15" in msg
+        r[0] += shift
+    msg = _assert_error(_csv(tmp_path, rows), [words[0]])
+    assert all(w in msg for w in words) and "between 0.5 and 1.5 nominal steps" in msg, msg
+
+
+def test_a_step_of_1_4_nominal_steps_is_jitter_read_at_its_actual_times(tmp_path):
+    """Rows 12 on 0.04 s late: one step of 0.14 s in steps of 0.1 s. The rates (constant 1e-5, 2e-5, 3e-5 rad/s)
+    integrate to the same increments on the uniform grid of the same span, 1.94 s in 19 intervals."""
+    rows = _good_rows(20)
+    for r in rows[12:]:
+        r[0] += 0.04
+    imu, meta = read_imu(_csv(tmp_path, rows))
+    assert meta["resampled"] and imu.kind == "increment" and imu.samples == 19 and imu.t0 == pytest.approx(0.0)
+    np.testing.assert_allclose(imu.t, 1.94 / 19 * np.arange(1, 20), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(imu.gyro[0], np.tile([1e-5, 2e-5, 3e-5], (19, 1)) * 1.94 / 19, rtol=1e-12)
+    np.testing.assert_allclose(imu.accel[0].sum(axis=0), np.array([0.1, 0.2, 9.8]) * 1.94, rtol=1e-14)
 
 
 def test_small_jitter_accepted(tmp_path):
     rows = _good_rows(20)
-    rows[7][0] += 0.5e-4  # 5e-4 of the 0.1 s step, inside the 1e-3 tolerance
-    imu, _ = read_imu(_csv(tmp_path, rows))
-    assert imu.samples == 20
+    rows[7][0] += 0.5e-4  # 5e-4 of the 0.1 s step, inside the 1e-3 tolerance: read as it is
+    imu, meta = read_imu(_csv(tmp_path, rows))
+    assert imu.samples == 20 and imu.kind == "rate" and not meta["resampled"] and meta["resampling_c_s2"] == 0.0
+    assert imu.t[7] == rows[7][0] and meta["jitter_s"] == pytest.approx(0.5e-4)
 
 
 def test_too_short(tmp_path):
@@ -340,7 +372,14 @@ def test_npz_missing_array_nan_and_bad_archive(tmp_path):
     assert "index 3" in msg and "'gy'" in msg
     t = 0.1 * np.arange(10)
     t[7] = t[6]
-    _assert_error(_npz(tmp_path, "t.npz", t=t), ["not strictly increasing"])
+    msg = _assert_error(_npz(tmp_path, "t.npz", t=t), ["not strictly increasing"])
+    assert "index 7" in msg and "a duplicate time" in msg
+    t[7] = t[6] - 0.01
+    assert "a reversal" in _assert_error(_npz(tmp_path, "r.npz", t=t), ["not strictly increasing at index 7"])
+    t = 0.1 * np.arange(10) + 0.01 * np.sin(np.arange(10))  # jitter of up to a tenth of the step
+    imu, meta = read_imu(_npz(tmp_path, "j.npz", t=t))
+    assert meta["resampled"] and imu.kind == "increment" and imu.samples == 9
+    np.testing.assert_allclose(imu.accel[0], 9.8 * (t[-1] - t[0]) / 9, rtol=1e-12)
     _assert_error(_npz(tmp_path, "s.npz", t=np.array(["a"] * 10)), ["dtype"])
     bad = tmp_path / "bad.npz"
     bad.write_text("not a zip")
@@ -379,6 +418,29 @@ def test_psins_bad_header(tmp_path):
     _assert_error(_imu_file(tmp_path, rows, head="-2 1 160 0 0 0\n-30 150 0 0 -20 9.78\n"
                             "0.01 0.01 0.01 10 10 10\n", name="d.imu"), ["positive"])
     _assert_error(_imu_file(tmp_path, [], head="% only\n-2 1 160 0 0 0\n", name="h.imu"), ["header"])
+
+
+def test_a_path_is_a_str_bytes_or_path_like_and_anything_else_is_one_line(tmp_path):
+    p = _csv(tmp_path, _good_rows())
+    want, _ = read_imu(p)
+
+    class Where:  # an os.PathLike of one's own
+        def __fspath__(self):
+            return os.fsencode(p)
+
+    for path in (str(p), os.fsencode(p), Where(), p):
+        for reader in (read_imu, fio.read_csv):
+            imu, meta = reader(path)
+            assert meta["path"] == str(p) and np.array_equal(imu.gyro, want.gyro) and np.array_equal(imu.t, want.t)
+    with pytest.raises(IMUFileError) as ei:
+        read_imu(os.fsencode(tmp_path / "gone.npz"))
+    assert str(ei.value) == f"{tmp_path / 'gone.npz'}: file not found"
+    for bad in (3, None, ["a.csv"]):
+        with pytest.raises(TypeError) as ei:
+            read_imu(bad)
+        msg = str(ei.value)
+        assert "\n" not in msg and msg.startswith("IMU file path: expected a str, bytes or os.PathLike, found "), msg
+        assert type(bad).__name__ in msg
 
 
 def test_error_is_a_value_error_with_attributes(tmp_path):

@@ -11,7 +11,9 @@ record through the analytic coarse alignment.
 
 import ast
 import dataclasses
+import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -223,6 +225,69 @@ def test_fusionbench_csv_layout_equals_read_csv(tmp_path, sway):
     for name in ("t", "gyro", "accel"):
         np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
     assert (b.kind, meta_b["samples"], meta_b["dt"]) == (a.kind, meta_a["samples"], meta_a["dt"])
+
+
+JITTER_CASES = [("builtin", "pyins"), ("builtin", "kf-gins"), ("format", "arcsec-ns")]
+
+
+@pytest.mark.parametrize("source,name", JITTER_CASES, ids=[n for _, n in JITTER_CASES])
+def test_a_log_with_jittered_times_is_resampled_and_lands_on_the_truth(tmp_path, sway, source, name):
+    """The sway stamped 10 % of a step early or late at random: rates at the actual times, or the exact increments
+    over the actual intervals (4-point Gauss-Legendre, the first one mean step long). Read onto the uniform grid of
+    the same span, the strapdown lands on the truth within the uniform round trip's bounds: the resampling bound
+    c (max|dw/dt| + int |w x dw/dt| dt) of this sway is under 0.1 arcsec, a tenth of them."""
+    tr, _ = sway
+    layout, kind, _ = case_layout(tmp_path, source, name)
+    tau = DT * np.arange(N) + np.random.default_rng(5).uniform(-0.1, 0.1, N) * DT
+    if kind == "rate":
+        gyro, accel = tr.kinematics(tau)
+    else:
+        starts = np.r_[tau[0] - (tau[-1] - tau[0]) / (N - 1), tau[:-1]]
+        x, w = np.polynomial.legendre.leggauss(4)
+        mid, half = 0.5 * (starts + tau), 0.5 * (tau - starts)
+        rates = tr.kinematics((mid[:, None] + half[:, None] * x).ravel())
+        gyro, accel = (np.einsum("nqi,nq->ni", r.reshape(N, 4, 3), half[:, None] * w) for r in rates)
+    jittered = SimpleNamespace(t=tau, gyro=gyro[None], accel=accel[None], dt=DT)  # IMUData would refuse the times
+    back, meta = read_layout(write_log(tmp_path / f"jit-{name}.txt", layout, jittered), layout)
+    assert meta["resampled"] and meta["kind"] == kind and back.kind == "increment"
+    assert back.samples == N - (kind == "rate") and back.t[-1] == pytest.approx(tau[-1], abs=1e-9)
+    assert np.ptp(np.diff(back.t)) < 1e-9 and 0.05 * DT < meta["jitter_s"] < 0.21 * DT
+    shift_att, shift_v = shift_errors(tr, back)
+    att, vel = nav_error(tr, back)
+    assert att < shift_att / 100 and vel < shift_v / 1000
+
+
+@pytest.mark.parametrize("what, words", [
+    ("gap", ["gap in time at row 3 (line 4)", "step 0.01 s after 456300.01 s, 2 times the nominal step 0.005 s: "
+                                              "about 1 sample(s) missing"]),
+    ("duplicate", ["time not strictly increasing at row 3 (line 4): a duplicate time, t=456300.01 s after "
+                   "456300.01 s"]),
+    ("reversal", ["time not strictly increasing at row 3 (line 4): a reversal, t=456300.005 s after 456300.01 s"]),
+    ("short", ["time step too short at row 3 (line 4): step 0.001 s", "0.2 times the nominal step"]),
+])
+def test_bad_times_in_a_kf_gins_log_name_the_row(tmp_path, what, words):
+    stamps = {"gap": "456300.02", "duplicate": "456300.01", "reversal": "456300.005", "short": "456300.011"}
+    rows = _kfgins_rows(8).splitlines()
+    if what == "gap":  # row 3 onwards a step later: one sample missing
+        rows = rows[:3] + rows[4:]
+    else:
+        rows[3] = " ".join([stamps[what]] + rows[3].split()[1:])
+    p = tmp_path / "k.txt"
+    p.write_text("\n".join(rows) + "\n")
+    with pytest.raises(IMUFileError) as ei:
+        read_layout(p, "kf-gins")
+    _one_line(ei, "k.txt", *words)
+
+
+def test_a_path_may_be_bytes_or_path_like(tmp_path):
+    p = tmp_path / "k.txt"
+    p.write_text(_kfgins_rows(5))
+    want, _ = read_layout(p, "kf-gins")
+    for path in (os.fsencode(p), str(p)):
+        got, meta = read_layout(path, "kf-gins")
+        assert meta["path"] == str(p) and np.array_equal(got.gyro, want.gyro)
+    with pytest.raises(TypeError, match="expected a str, bytes or os.PathLike, found int"):
+        read_layout(7, "kf-gins")
 
 
 # ------------------------------------------------------------------------------------------------ the axes
