@@ -16,15 +16,20 @@ from . import earth, units
 MAX_BIAS_TO_EARTH_RATE = 0.5
 
 
+def gyro_bias(spec) -> float:
+    """The gyro bias an aligner does not know, rad/s: the largest axis of ``sqrt(bias^2 + bias_sigma^2 +
+    instability^2)`` of ``spec.gyro`` (fixed, per-run random and drifting parts)."""
+    g = spec.gyro
+    return float(np.max(np.sqrt(np.square(g.bias) + np.square(g.bias_sigma) + np.square(g.instability))))
+
+
 def azimuth_bias_ratio(spec, lat) -> float:
     """Gyro bias over the horizontal earth rate: how far the IMU's gyros can turn a gyrocompass's north.
 
-    The bias is the largest axis of ``sqrt(bias^2 + bias_sigma^2 + instability^2)`` (fixed, per-run random
-    and drifting parts: none is known to the aligner), rad/s; the horizontal earth rate is
-    ``OMEGA_IE cos(lat)`` (``lat`` rad). sin of the azimuth error the bias causes is this ratio.
+    The bias is :func:`gyro_bias` (none of its parts is known to the aligner), rad/s; the horizontal earth rate
+    is ``OMEGA_IE cos(lat)`` (``lat`` rad). sin of the azimuth error the bias causes is this ratio.
     """
-    g = spec.gyro
-    b = float(np.max(np.sqrt(np.square(g.bias) + np.square(g.bias_sigma) + np.square(g.instability))))
+    b = gyro_bias(spec)
     w_h = earth.OMEGA_IE * abs(np.cos(lat))
     return np.inf if w_h == 0 else b / w_h
 
@@ -40,8 +45,7 @@ def check_azimuth_observable(spec, site, name: str):
         return
     ratio = azimuth_bias_ratio(spec, site.lat)
     if ratio > MAX_BIAS_TO_EARTH_RATE:
-        g = spec.gyro
-        b = float(np.max(np.sqrt(np.square(g.bias) + np.square(g.bias_sigma) + np.square(g.instability))))
+        b = gyro_bias(spec)
         w_h = earth.OMEGA_IE * abs(np.cos(site.lat))
         raise ValueError(f"{name}: the azimuth is unobservable with IMU '{spec.name}': gyro bias {b / units.DEG_PER_H:.3g} "
                          f"deg/h against a horizontal earth rate of {w_h / units.DEG_PER_H:.3g} deg/h at "
@@ -128,14 +132,59 @@ class Supports:
                outage_s=0.0) -> bool:
         """Whether the method claims a condition with this base, at this latitude (deg), with a gyro whose bias is
         ``bias_ratio`` of the horizontal earth rate there (:func:`azimuth_bias_ratio`) and, on a moving base, the
-        aiding kinds ``aiding`` (``"velocity"``, ``"position"``) at ``aiding_hz`` with gaps up to ``outage_s`` s."""
-        most = self.max_bias_ratio if base != "moving" or self.max_bias_ratio_moving is None \
-            else self.max_bias_ratio_moving
-        ok = (base in self.bases and abs(lat_deg) <= self.max_abs_lat_deg + 1e-9 and bias_ratio <= most + 1e-12)
-        if ok and base == "moving" and aiding:
-            ok = (any(k in self.aiding for k in aiding) and aiding_hz >= self.min_aiding_hz - 1e-9
-                  and outage_s <= self.max_outage_s + 1e-9)
-        return ok
+        aiding kinds ``aiding`` (``"velocity"``, ``"position"``) at ``aiding_hz`` with gaps up to ``outage_s`` s:
+        :meth:`unclaimed` finds nothing."""
+        return not self.unclaimed(base, lat_deg, bias_ratio, aiding, aiding_hz, outage_s)
+
+    def unclaimed(self, base: str, lat_deg: float, bias_ratio: float | None = 0.0, aiding=(),
+                  aiding_hz=float("inf"), outage_s=0.0, gyro="the gyro") -> list:
+        """What of a condition the method does not claim, one short reason each (empty: it claims it all).
+
+        Parameters
+        ----------
+        base : str
+            The kind of base (:data:`BASES`).
+        lat_deg : float
+            Latitude, deg.
+        bias_ratio : float or None
+            The gyro bias over the horizontal earth rate there (:func:`azimuth_bias_ratio`, dimensionless); None:
+            not known (not checked).
+        aiding : tuple of str
+            On a moving base, the kinds of aiding rows given (``"velocity"``, ``"position"``); empty: not checked.
+        aiding_hz : float
+            Their rate, Hz.
+        outage_s : float
+            Their longest gap beyond the rows' interval, s.
+        gyro : str
+            What the bias reason calls the gyro (e.g. the IMU's name and bias).
+        """
+        if not self.bases:
+            return ["it claims no condition: " + ("a navigator, it needs an initial attitude" if self.needs_init else
+                                                  "its parameters are kept to reproduce a paper")]
+        out = []
+        if base not in self.bases:
+            out.append(f"a {BASE_WORDS.get(base, base)} base, which it does not claim (it claims "
+                       f"{', '.join(self.bases)})")
+        if abs(lat_deg) > self.max_abs_lat_deg + 1e-9:
+            out.append(f"latitude {lat_deg:.4g} deg, beyond the {self.max_abs_lat_deg:g} deg it claims")
+        moving = base == "moving"
+        most = self.max_bias_ratio if not moving or self.max_bias_ratio_moving is None else self.max_bias_ratio_moving
+        if bias_ratio is not None and bias_ratio > most + 1e-12:
+            out.append(f"{gyro} is {bias_ratio:.3g} of the horizontal earth rate at the site, beyond the {most:g} it "
+                       f"claims" + (" on a moving base" if moving and self.max_bias_ratio_moving is not None else ""))
+        if moving and aiding:
+            if not any(k in self.aiding for k in aiding):
+                out.append(f"aiding of {' and '.join(aiding)} rows, which it does not claim (it claims "
+                           f"{' or '.join(self.aiding)})")
+            if aiding_hz < self.min_aiding_hz - 1e-9:
+                out.append(f"aiding rows at {aiding_hz:.3g} Hz, below the {self.min_aiding_hz:g} Hz it claims")
+            if outage_s > self.max_outage_s + 1e-9:
+                out.append(f"an aiding outage of {outage_s:.3g} s, beyond the {self.max_outage_s:g} s it claims")
+        return out
+
+
+#: How :meth:`Supports.unclaimed` names each kind of base.
+BASE_WORDS = {"static": "stationary", "sway": "swaying", "moving": "moving"}
 
 
 def supports(method) -> Supports:

@@ -6,11 +6,12 @@ read them: :mod:`fusionbench.aidingfiles`, docs/aiding.md)."""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from . import attitude
+from . import attitude, units
 from .aiding import MAX_DELAY_S, MAX_LEVER_ARM_M
 from .aligner import GROUP, AlignmentResult, Site, call_align, check_time_rule, load_method
 from .cli_common import kind, named, seconds
@@ -192,6 +193,9 @@ def cmd_align(args):
            "roll_deg": float(roll), "yaw_deg": float(yaw), "heading_deg": float(np.degrees(attitude.heading(np.radians(yaw))))}
     if aiding is not None:
         out["aiding"] = aiding_json(args, aiding)
+    out.update(answer_claims(method, res, imu, site, aiding, noise))
+    if out["outside_claim"] is not None:
+        print(f"fusionbench: warning: {method.name}: outside its claim: {out['outside_claim']}", file=sys.stderr)
     if args.json:
         print(json.dumps(out, allow_nan=False))
     else:
@@ -200,7 +204,48 @@ def cmd_align(args):
         if aiding is not None:
             print(aiding_line(out["aiding"]))
         print(f"pitch {out['pitch_deg']:.4f} deg, roll {out['roll_deg']:.4f} deg, heading {out['heading_deg']:.4f} deg")
+        print(f"base {out['base']}; predicted sigma {enu_text(out['sigma_arcmin'], 'none (the method gives none)')}")
+        print(f"limit of the IMU's fixed biases: {enu_text(out['limit_arcmin'], 'none (' + str(out['limit_note']) + ')')}")
+        print("inside the method's claim" if out["outside_claim"] is None else
+              f"outside the method's claim: {out['outside_claim']}")
     return 0
+
+
+#: Why ``align``'s ``limit_arcmin`` is null.
+NO_LIMIT = {"imu": "no --imu: the limit is that of a named IMU's fixed biases",
+            "moving": "a moving base: the static limit does not hold in motion (turns and accelerations make the "
+                      "biases partly observable), and the moving one needs the trajectory"}
+
+
+def answer_claims(method, res, imu, site, aiding, spec):
+    """What ``align`` adds to an answer: the kind of base (``base``), the method's predicted sigma at the last sample
+    (``sigma_arcmin``, from ``res.sigma_phi``; None without), the limit the fixed biases of ``spec`` put the
+    misalignment at, at the answer's attitude and the site (``limit_arcmin``, :func:`fusionbench.metrics.theoretical_limits`;
+    None without ``spec`` or on a moving base, ``limit_note`` saying why) and why the answer lies outside the
+    method's claim (``outside_claim``, :func:`fusionbench.claim_check.outside_claim`; None inside). Angles are
+    ``{"E", "N", "U"}`` misalignment components, ENU, arcmin."""
+    from .claim_check import base_kind, outside_claim
+    from .metrics import theoretical_limits
+
+    base = base_kind(imu, aiding)
+    sigma = None if res.sigma_phi is None else enu_arcmin(res.sigma_phi[0, -1])
+    limit, note = None, NO_LIMIT["imu"] if spec is None else NO_LIMIT["moving"] if base == "moving" else None
+    if note is None:
+        limit = enu_arcmin(theoretical_limits(spec.gyro.bias, spec.accel.bias, res.C_bn_final[0], site.lat, site.h))
+    return {"base": base, "sigma_arcmin": sigma, "limit_arcmin": limit, "limit_note": note,
+            "outside_claim": outside_claim(method, imu, site, aiding=aiding, spec=spec)}
+
+
+def enu_arcmin(phi):
+    """``{"E", "N", "U"}`` of a misalignment vector (3,) in rad, in arcmin (None for a value that is not finite)."""
+    return {k: float(v / units.ARCMIN) if np.isfinite(v) else None for k, v in zip("ENU", np.asarray(phi, float))}
+
+
+def enu_text(enu, none):
+    """``E x, N y, U z arcmin`` of :func:`enu_arcmin`'s dict, or ``none``."""
+    if enu is None:
+        return none
+    return ", ".join(f"{k} {'n/a' if v is None else f'{v:.3g}'}" for k, v in enu.items()) + " arcmin"
 
 
 def aiding_line(info):
@@ -221,7 +266,8 @@ def cmd_identify(args):
 
 def cmd_consistency(args):
     from .consistency import consistency
-    from .consistency_report import summary_lines, write_consistency_report
+    from . import reportdir
+    from .consistency_report import OUTPUT, summary_lines, write_consistency_report
 
     methods = [m for m in args.methods.split(",") if m]
     if not methods:
@@ -232,10 +278,15 @@ def cmd_consistency(args):
     aiding = read_aiding_file(args)
     imu, meta = read_record(args)
     site = record_site(args, meta)
-    res = consistency(imu, site, methods, window_s=args.window, imu_model=args.imu,  # a bar on a terminal
-                      aiding=aiding)
-    about = None if aiding is None else aiding_json(args, aiding)
-    paths = write_consistency_report(res, Path(args.out), aiding=about)
+    created = reportdir.prepare([Path(args.out)], OUTPUT)  # a folder it may not replace: refused before any work
+    try:
+        res = consistency(imu, site, methods, window_s=args.window, imu_model=args.imu,  # a bar on a terminal
+                          aiding=aiding)
+        about = None if aiding is None else aiding_json(args, aiding)
+        paths = write_consistency_report(res, Path(args.out), aiding=about)
+    except BaseException:
+        reportdir.remove_empty(created)
+        raise
     print(f"{args.imu_file}: {imu.duration:.0f} s at {1 / imu.dt:g} Hz, site {np.degrees(site.lat):.4f} deg latitude")
     if about is not None:
         print(aiding_line(about))

@@ -45,7 +45,11 @@ def test_align_json_on_a_written_csv_from_any_heading(tmp_path, heading):
     r = cli("align", path, "--lat", -30, "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    assert set(out) == {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg"}
+    assert set(out) == {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg", "base",
+                        "sigma_arcmin", "limit_arcmin", "limit_note", "outside_claim"}
+    # a static record inside the default method's claim; no --imu: no limit, and the note says why
+    assert out["base"] == "static" and out["outside_claim"] is None
+    assert out["limit_arcmin"] is None and "--imu" in out["limit_note"]
     C_true = tr.truth([120.0]).C_bn[0]
     err = attitude.misalignment(np.array(out["C_bn"]), C_true)
     # noise-free navigation-grade biases: level within 0.5 arcmin, azimuth within 3 arcmin of the truth
@@ -100,8 +104,10 @@ def test_run_check_and_regression(tmp_path):
     assert r.returncode == 0, r.stderr
     m = json.loads((out / "metrics.json").read_text())
     assert m["quick"] is True and m["runs"] == 2
-    assert set(m["methods"]) == {"coarse", "fusionbench.coarse:InertialCoarseAligner"}
-    assert (out / "report.md").exists() and (out / "errors.png").exists()
+    # a method given by its import path is labelled by its name, and the report says which path that was
+    assert set(m["methods"]) == {"coarse", "coarse-i0"}
+    assert "`coarse-i0` (`fusionbench.coarse:InertialCoarseAligner`)" in (out / "report.md").read_text()
+    assert (out / "errors.png").exists()
     _check_provenance(m["provenance"], runs=2)
     ref = tmp_path / "ref.json"
     ref.write_text(json.dumps(m))

@@ -527,9 +527,11 @@ def test_only_the_targets_own_leftovers_are_swept(tmp_path):
 
 @pytest.mark.parametrize("command", ["identify", "consistency"])
 def test_identify_and_consistency_refuse_a_folder_of_other_files(capsys, tmp_path, recording, command, monkeypatch):
+    import fusionbench.consistency
     import fusionbench.identify
 
     monkeypatch.setattr(fusionbench.identify, "identify", lambda *a, **k: pytest.fail("identified before the check"))
+    monkeypatch.setattr(fusionbench.consistency, "consistency", lambda *a, **k: pytest.fail("aligned before the check"))
     out = tmp_path / "mine"
     out.mkdir()
     (out / "thesis.tex").write_text("years of work")

@@ -174,7 +174,10 @@ def test_a_car_drive_is_refused_without_its_aiding_and_aligned_with_it(capsys, t
     status, out, err = fb(capsys, *args, "--aiding", rows_csv, "--lever-arm", ",".join(map(str, LEVER)), "--json")
     assert status == 0, err
     res = json.loads(out)
-    assert set(res) == {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg", "aiding"}
+    assert set(res) == {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg", "aiding", "base",
+                        "sigma_arcmin", "limit_arcmin", "limit_note", "outside_claim"}
+    assert res["base"] == "moving" and res["outside_claim"] is None and res["sigma_arcmin"] is None
+    assert res["limit_arcmin"] is None and "--imu" in res["limit_note"]  # no --imu given
     assert res["aiding"] == {"file": str(rows_csv), "format": "csv", "rows": 14999, "kinds": ["velocity"],
                              "lever_arm_m": list(LEVER), "delay_s": 0.0, "time_offset_s": 0.0, "t_first_s": 0.04,
                              "t_last_s": 300.0}

@@ -119,7 +119,9 @@ def test_readme_moving_recording_walk_through(tmp_path, monkeypatch, capsys):
     assert main(cmd[1:]) == 0
     printed = capsys.readouterr().out.strip("\n").split("\n")
     _same_numbers(shown, printed)
-    pitch, roll, heading = (float(x) for x in re.findall(r"-?\d+\.\d+", printed[-1]))
+    line = next(p for p in printed if p.startswith("pitch "))
+    pitch, roll, heading = (float(x) for x in re.findall(r"-?\d+\.\d+", line))
+    assert printed[-1] == "inside the method's claim"
     # within three of this drive's attainable bounds (about 1 arcmin of heading, 0.05 of level) of the truth
     assert abs(pitch - 1.0) * 60 < 0.2 and abs(roll + 2.0) * 60 < 0.2 and abs(heading - 70.0) * 60 < 3.0
     assert ns["car"].duration == 300.0
