@@ -11,7 +11,8 @@ with outages). Frames: ENU navigation frame, body RFU, ``C_bn`` body to ENU,
 * On a fixed base every alignment lands on :func:`fusionbench.metrics.theoretical_limits` (give or take half a
   record of azimuth drift: :func:`bias_limit`), the part of the fixed biases (``spec.gyro.bias``,
   ``spec.accel.bias``) that no data separate from the attitude, and :func:`attainable_bound` is the noise part
-  about it.
+  about it. A velocity disturbance of the base that the reference does not report is an unknown coloured process
+  in the model (:func:`fusionbench.bound_model.disturbance_block`), not known motion.
 * On a moving base, turns above all, the biases become partly observable and that closed form no longer says where
   an optimal estimator lands. :func:`bias_limit` generalises it: the mean misalignment of the optimal filter that
   carries the biases as states (zero-mean prior, the fixed part included) when the true fixed biases drive the
@@ -23,11 +24,15 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from . import bound_model as bm
 from .bound_model import VREF_FLOOR, bound_error
 
-__all__ = ["attainable_bound", "bias_limit", "BiasLimit", "VREF_FLOOR"]
+__all__ = ["attainable_bound", "bias_limit", "BiasLimit", "VREF_FLOOR", "scenario_bound", "efficiency", "BOUND_KINDS"]
+
+#: Scenario kinds whose metrics carry the attainable bound and the efficiency (:func:`scenario_bound`).
+BOUND_KINDS = ("alignment", "moving-alignment")
 
 _INITIAL_SIGMA = (1.0, 1.0, 1.0, 10.0, 10.0)
 
@@ -51,7 +56,7 @@ class BiasLimit(NamedTuple):
 
 
 def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0, vref_dt=0.01, step_s=0.5,
-                     C_bn=None, initial_sigma=_INITIAL_SIGMA, aiding=None):
+                     C_bn=None, initial_sigma=_INITIAL_SIGMA, aiding=None, vref_schedules=()):
     """Standard deviation of the misalignment an optimal estimator reaches, beyond the theoretical limit.
 
     Any stationary alignment lands on :func:`fusionbench.metrics.theoretical_limits`, the part of the error caused
@@ -80,9 +85,10 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
     Gauss-Legendre points of the step (a swaying base: keep the step a fraction of the sway periods). Measurements:
 
     * per-increment reference (``aiding`` None): ``ceil(duration / step_s)`` equal steps; at each step end the
-      horizontal velocity error with noise variance ``vref_sigma^2 vref_dt / step`` per axis, the information of
-      all the reference samples of the step (their average, attributed to the step end: accurate while the
-      velocity error changes little within a step compared with that noise);
+      horizontal velocity error with noise variance ``vref_sigma^2 vref_dt / step`` per axis (times the mean over
+      the step's samples of any ``vref_schedules`` factor), the information of all the reference samples of the
+      step (their average, attributed to the step end: accurate while the velocity error changes little within a
+      step compared with that noise);
     * a receiver (``aiding``): steps of ``1 / (k rate_hz)``, ``k = ceil(1 / (rate_hz step_s))``, so that every
       epoch ``j / rate_hz`` ends a step (the cost grows with the rate: 3000 steps at 10 Hz for 300 s). At each
       epoch outside the outages, the antenna's horizontal velocity error ``dv + ([u x] phi)[E,N]``,
@@ -91,6 +97,15 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
       translate) the velocity rows say the base is at rest: the IMU's velocity, no lever term. The rows count at
       their time of validity: the latency changes no information. The gyro noise in ``omega_nb^b`` of the lever
       term is not modelled (1.5 m times a 0.1 deg/s noise is 3 mm/s).
+
+    A base's velocity disturbance (``trajectory.translation.disturbance``) that the measurements do not report, as
+    the per-increment reference never does (it gives the nominal motion) nor a receiver on a fixed base (zero
+    velocity, the site), is a coloured process the aligner does not know: its horizontal velocity, modelled as
+    white noise through a band-pass over its band with its rms (:func:`fusionbench.bound_model.disturbance_block`),
+    adds to the velocity error the rows measure (and its displacement to a position row's), and the kinematics are
+    the nominal motion's (the disturbance's accelerations are not known motion). Each reference measurement is then
+    the step's average of the velocity error and the disturbance, exactly. A receiver on a moving base measures the
+    true velocity: there the disturbance is known motion, as the IMU senses it.
 
     The covariance is propagated and updated in square-root form (QR of the pre-arrays), which keeps it positive
     and accurate with a diffuse start and an exact reference.
@@ -106,7 +121,8 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
     trajectory : fusionbench.trajectory.Trajectory, optional
         Swaying or moving base: its truth gives C_bn(t), f^n(t) = C_bn f^b, the earth and transport
         rates (ENU) along the path, evaluated over [0, duration] (past its own ``duration`` a
-        profile continues as its definition extends it).
+        profile continues as its definition extends it); its nominal motion's where its velocity disturbance is
+        not measured (above).
     vref_sigma : float or (3,) array_like
         White-noise std of each velocity-reference sample, m/s (ENU; the east and north values
         are used). 0 means an exact velocity; the per-step measurement std is floored at
@@ -126,6 +142,10 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
         A receiver's rows in place of the per-increment reference: ``rate_hz``, ``velocity_sigma`` (3,) m/s ENU,
         ``position_sigma`` (3,) m ENU (the east and north values are used; 0 is exact, floored at 1e-9),
         ``lever_arm`` (3,) m body RFU, ``outages`` ((start, end), ...) s of valid time, ``schedules``.
+    vref_schedules : sequence of fusionbench.imu.NoiseSchedule
+        The per-increment reference's variance multiplied by ``factor`` for ``start <= t < end`` (s), as
+        :class:`fusionbench.imu.VelocityReferenceSpec`'s ``schedules`` (their ``sensors`` ignored). Empty with
+        ``aiding`` (the rows have their own).
 
     Returns
     -------
@@ -139,14 +159,15 @@ def attainable_bound(spec, duration, site=None, trajectory=None, vref_sigma=0.0,
     ValueError
         One line naming the argument, what was expected and what was found.
     """
-    t_end, model = _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma,
-                          aiding, fixed_prior=False)
-    sigma, _ = _square_root_filter(*model)
+    with threadpool_limits(1):  # small matrices: BLAS threads only contend (10-50 times slower on a busy machine)
+        t_end, model = _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma,
+                              aiding, vref_schedules, fixed_prior=False)
+        sigma, _ = _square_root_filter(*model)
     return t_end, sigma
 
 
 def bias_limit(spec, duration, site=None, trajectory=None, vref_sigma=0.0, vref_dt=0.01, step_s=0.5, C_bn=None,
-               initial_sigma=_INITIAL_SIGMA, aiding=None):
+               initial_sigma=_INITIAL_SIGMA, aiding=None, vref_schedules=()):
     """Where the fixed biases put an optimal estimator's misalignment, on any base, and its spread about it.
 
     The filter of :func:`attainable_bound` (same model, steps and measurements) with the fixed biases
@@ -174,7 +195,7 @@ def bias_limit(spec, duration, site=None, trajectory=None, vref_sigma=0.0, vref_
 
     Parameters
     ----------
-    spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma, aiding
+    spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma, aiding, vref_schedules
         As :func:`attainable_bound`.
 
     Returns
@@ -187,8 +208,9 @@ def bias_limit(spec, duration, site=None, trajectory=None, vref_sigma=0.0, vref_
     ValueError
         One line naming the argument, what was expected and what was found.
     """
-    t_end, model = _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma,
-                          aiding, fixed_prior=True)
+    with threadpool_limits(1):
+        t_end, model = _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma,
+                              aiding, vref_schedules, fixed_prior=True)
     *model, constant = model
     n = model[3].size
     bias = np.zeros(6)  # the fixed biases, gyro then accel (rad/s, m/s^2, body)
@@ -197,13 +219,41 @@ def bias_limit(spec, duration, site=None, trajectory=None, vref_sigma=0.0, vref_
         if sensor in constant:
             bias[3 * j:3 * j + 3] = e.bias
             D0[constant[sensor]:constant[sensor] + 3, 3 * j:3 * j + 3] = np.eye(3)
-    sigma, D = _square_root_filter(*model, D0=D0)
+    with threadpool_limits(1):
+        sigma, D = _square_root_filter(*model, D0=D0)
     limit = D @ bias
     spread2 = sigma**2 - np.sum((D * bias) ** 2, axis=-1)
     return BiasLimit(t_end, limit, np.sqrt(np.clip(spread2, 0.0, None)))
 
 
-def _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma, aiding, fixed_prior):
+def scenario_bound(scn, traj, duration, history=False):
+    """The attainable bound (3,) rad at the end of the record ``traj`` (``duration`` s), ENU, of an alignment
+    scenario ``scn`` (:class:`fusionbench.scenarios.Scenario` of a kind in :data:`BOUND_KINDS`; else None), with the
+    aiding the methods get (its ``reference_model()`` and the reference's noise schedules): on a fixed base the
+    spread of an optimal estimator about the theoretical limit (:func:`attainable_bound`); on a moving one the
+    spread of the optimal estimator that does not know the fixed biases about the limit it lands on, the
+    scenario's limit there (``scn.moving_limit``: :func:`bias_limit`). With ``history`` its course ``(t (M,) s,
+    sigma (M, 3) rad)``."""
+    if scn.kind not in BOUND_KINDS:
+        return None
+    if not traj.translation.is_static():
+        t, _, sigma = scn.moving_limit(traj)
+    else:
+        model = scn.reference_model()
+        if "aiding" not in model:
+            model["vref_schedules"] = tuple(scn.vref_spec.schedules)
+        t, sigma = attainable_bound(scn.imu_spec, duration, trajectory=traj, **model)
+    return (t, sigma) if history else sigma[-1]
+
+
+def efficiency(phi_end, limits, bound):
+    """The conformance matrix's efficiency per axis (3,): the RMS over runs of the final error ``phi_end`` (R, 3) rad
+    minus the limit ``limits`` (3,) rad, over the attainable bound ``bound`` (3,) rad (1: an optimal estimator)."""
+    return np.sqrt(np.mean((np.asarray(phi_end) - limits) ** 2, axis=0)) / np.asarray(bound)
+
+
+def _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, initial_sigma, aiding, vref_schedules,
+           fixed_prior):
     """Validate the arguments and build the model: the step end times (M,) and ``(Phi, L, idx, P0, meas)`` for
     :func:`_square_root_filter`, plus the random-constant blocks' indices with ``fixed_prior``."""
     from .imu import IMUSpec, _psd_factor
@@ -227,6 +277,9 @@ def _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, 
             raise bound_error("aiding", "an AidingSpec", type(aiding).__name__)
         if np.any(vs != 0):
             raise bound_error("vref_sigma", "0 with aiding (the rows' sigmas are the aiding's)", vs.tolist())
+        if len(vref_schedules):
+            raise bound_error("vref_schedules", "none with aiding (the rows have their own schedules)",
+                              f"{len(vref_schedules)} schedule(s)")
     position = aiding is not None and aiding.position_sigma is not None
     s0 = np.asarray(initial_sigma, dtype=float) if np.ndim(initial_sigma) else np.full(5, float(initial_sigma))
     if s0.shape not in ((5,), (7,)):
@@ -236,16 +289,23 @@ def _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, 
         raise bound_error("initial_sigma", "positive finite stds", s0.tolist())
     s0 = np.concatenate([s0[:5], s0[5:] if s0.size == 7 else [bm.INITIAL_POSITION_SIGMA] * 2]) if position else s0[:5]
 
+    dist, trajectory = bm.unreported_disturbance(trajectory, aiding)
     t_end, T, k = bm.step_grid(duration, step_s, None if aiding is None else aiding.rate_hz)
     M = t_end.size
     tq = ((t_end - T / 2)[:, None] + T[:, None] / 2 * bm._GL_X[None, :]).ravel()  # 4 points per step
     Cq, fq, w_in, w_cor = bm.kinematics(tq, M, site, trajectory, C_bn)
     F, Qc, P0, constant = bm.error_model(spec, tq, M, Cq, fq, w_in, w_cor, s0, _psd_factor, position, fixed_prior)
-    Phi, L, idx = bm.discretise(F, Qc, T)
+    rows = None
+    if dist is not None:
+        kinds = ("average",) if aiding is None else ("velocity", "position") if position else ("velocity",)
+        F, Qc, P0, rows = bm.disturbance_block(dist, F, Qc, P0, kinds)
+    Phi, L, idx = bm.discretise(F, Qc, T, () if rows is None else rows["reset"])
     if aiding is None:
-        meas = bm.vref_rows(M, P0.size, np.maximum(vs[:2] * np.sqrt(vref_dt / T[0]), VREF_FLOOR))
+        q = bm.vref_factor(t_end, T[0], vref_dt, vref_schedules)  # (M,)
+        meas = bm.vref_rows(M, P0.size, np.maximum(vs[:2] * np.sqrt(q[:, None] * vref_dt / T[0]), VREF_FLOOR),
+                            None if rows is None else rows["average"] / T[0])
     else:
-        meas = bm.aiding_rows(aiding, duration, k, P0.size, site, trajectory, C_bn)
+        meas = bm.aiding_rows(aiding, duration, k, P0.size, site, trajectory, C_bn, rows)
     model = (Phi, L, idx, P0, meas)
     return t_end, model + (constant,) if fixed_prior else model
 

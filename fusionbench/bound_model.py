@@ -5,12 +5,15 @@ or a receiver's rows with their lever arm).
 States, in this order: ``[phiE, phiN, phiU]`` (rad, ENU, ``C_est = (I - [phi x]) C_true``), ``[dvE, dvN]`` (m/s),
 ``[dpE, dpN]`` (m, east and north position error, only when positions are measured; the height is held), then a
 block of 3 body-frame states (RFU) per bias kind the model has: a random constant with its walk, and a first-order
-Gauss-Markov instability, for the gyro (rad/s) and the accelerometer (m/s^2). Errors are estimate minus truth.
+Gauss-Markov instability, for the gyro (rad/s) and the accelerometer (m/s^2), and last, where the base has a velocity
+disturbance that the measurements do not report (:func:`disturbance_block`), the states of its model. Errors are
+estimate minus truth.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import linalg, signal
 
 from . import attitude, earth
 
@@ -25,6 +28,10 @@ POSITION_FLOOR = 1e-9
 #: Initial standard deviation of the east and north position errors, m, when ``initial_sigma`` does not give them:
 #: diffuse against any receiver's position noise.
 INITIAL_POSITION_SIGMA = 1e3
+#: Order of the Butterworth band-pass that models a base's velocity disturbance on each horizontal axis
+#: (:func:`disturbance_block`; 2 states per order): order 8 changes seed 000's and a tactical IMU's bounds on a moored
+#: base with 0.05 m/s by 0.1 % in azimuth and 2 % in level.
+DISTURBANCE_ORDER = 4
 
 
 def bound_error(name, expected, found):
@@ -132,6 +139,107 @@ def error_model(spec, tq, M, Cq, fq, w_in, w_cor, s0, psd_factor, position=False
     return F, Qc, P0, constant
 
 
+def unreported_disturbance(trajectory, aiding):
+    """The base's velocity disturbance where the measurements do not report it, and the trajectory whose truth the
+    model's kinematics follow.
+
+    The per-increment reference reports the nominal motion only, and so does a receiver on a fixed base (zero
+    velocity, the site): the disturbance is then a random process unknown to the aligner, returned with the
+    trajectory without it (its accelerations are not known motion). A receiver on a moving base measures the true
+    velocity, disturbance included: ``(None, trajectory)``, as without a disturbance. A disturbance on the vertical
+    axis only is left out with the vertical channel: ``(None, the trajectory without it)``."""
+    from dataclasses import replace
+
+    dist = None if trajectory is None else getattr(trajectory.translation, "disturbance", None)
+    if dist is None or (aiding is not None and not trajectory.translation.is_static()):
+        return None, trajectory
+    try:
+        rms = np.broadcast_to(np.asarray(dist.rms, dtype=float), (3,))
+        lo, hi = (float(f) for f in dist.band)
+    except (AttributeError, TypeError, ValueError):
+        raise bound_error("trajectory", "a disturbance with an rms (3,) m/s and a band (2,) Hz",
+                          type(dist).__name__) from None
+    if not (np.all(np.isfinite(rms)) and np.all(rms >= 0) and 0 < lo < hi < np.inf):
+        raise bound_error("trajectory", "a disturbance's rms >= 0 m/s and band 0 < low < high Hz",
+                          f"rms {rms.tolist()}, band {[lo, hi]}")
+    nominal = replace(trajectory, translation=replace(trajectory.translation, disturbance=None))
+    return (dist if np.any(rms[:2] > 0) else None), nominal
+
+
+def _band_pass(rms, f1, f2):
+    """The order-:data:`DISTURBANCE_ORDER` Butterworth band-pass ``[f1, f2]`` Hz driven by white noise, scaled to a
+    stationary output rms of ``rms`` m/s: ``(A, Q, c)``, ``x' = A x + w``, ``E[w w^T] = Q delta``, velocity ``c x``,
+    in coordinates where its stationary covariance is the identity. A cascade of sections ``s / (s^2 + a1 s + a0)``
+    (one per pair of poles), each section's output the next one's input: well scaled where the polynomial's
+    companion form would span the band's powers."""
+    _, poles, _ = signal.butter(DISTURBANCE_ORDER, [2 * np.pi * f1, 2 * np.pi * f2], "bandpass", analog=True,
+                                output="zpk")
+    m = 2 * DISTURBANCE_ORDER
+    A, Q = np.zeros((m, m)), np.zeros((m, m))
+    for i, p in enumerate(poles[poles.imag > 0]):  # y'' = -|p|^2 y + 2 Re(p) y' + input, output y'
+        A[2 * i, 2 * i + 1] = 1.0
+        A[2 * i + 1, 2 * i], A[2 * i + 1, 2 * i + 1] = -abs(p) ** 2, 2 * p.real
+        if i:
+            A[2 * i + 1, 2 * i - 1] = 1.0
+    Q[1, 1] = 1.0
+    P = linalg.solve_continuous_lyapunov(A, -Q)
+    Q, P = Q * rms**2 / P[-1, -1], P * rms**2 / P[-1, -1]
+    T = np.linalg.cholesky(P)  # x = T z: z's stationary covariance is I
+    Ti = linalg.solve_triangular(T, np.eye(m), lower=True)
+    return Ti @ A @ T, Ti @ Q @ Ti.T, T[-1]
+
+
+def disturbance_block(dist, F, Qc, P0, rows):
+    """Append a model of a base's velocity disturbance that the measurements do not report to the continuous error
+    model ``F``, ``Qc`` (M, n, n) and the initial variances ``P0`` (n,).
+
+    The disturbance (:class:`fusionbench.trajectory.VelocityDisturbance`) has on each ENU axis an rms velocity
+    spread uniformly over its band ``[f1, f2]`` Hz (its spectrum over the random frequencies and phases). Its
+    velocity ``v_d`` on each horizontal axis with an rms is modelled as white noise through a Butterworth band-pass
+    of order :data:`DISTURBANCE_ORDER` over that band (its spectrum peaks at 97 % of the flat one, is half of that at
+    the band's edges and under 0.3 % of it a factor 2 beyond them), stationary from the start with that rms. The term ``[a_d x] phi`` of
+    its acceleration ``a_d`` in the velocity error is second order in what the aligner does not know and left out:
+    a horizontal disturbance turned by the azimuth error is one of the same statistics.
+
+    ``rows`` says what the disturbance adds to the measurements: ``"average"`` (the per-increment reference: the
+    average over a step of ``dv + v_d``, from accumulators ``A' = dv + v_d`` (m) that restart at every step),
+    ``"velocity"`` and/or ``"position"`` (a receiver on a fixed base: ``v_d`` at the row's time, and the
+    displacement since the start from ``D' = v_d``, ``D(0) = 0``, m).
+
+    Returns
+    -------
+    F, Qc : ndarray, shape (M, N, N)
+    P0 : ndarray, shape (N,)
+    out : dict
+        ``(2, N)`` coefficients of the state giving what the disturbance makes of each kind of row in ``rows`` (E
+        and N; the ``"average"`` ones the accumulators, to divide by the step length), and ``"reset"`` the indices
+        of the accumulators.
+    """
+    M, n = F.shape[:2]
+    m = 2 * DISTURBANCE_ORDER
+    rms = np.asarray(dist.rms, dtype=float)[:2]
+    axes = [a for a in range(2) if rms[a] > 0]
+    kinds = [k for k in ("average", "position") if k in rows]
+    N = n + m * len(axes) + 2 * len(kinds)
+    Fx, Qx, Px = np.zeros((M, N, N)), np.zeros((M, N, N)), np.zeros(N)
+    Fx[:, :n, :n], Qx[:, :n, :n], Px[:n] = F, Qc, P0
+    vel = np.zeros((2, N))  # v_d (E, N) from the state
+    for i, a in enumerate(axes):
+        x = n + m * i
+        Fx[:, x:x + m, x:x + m], Qx[:, x:x + m, x:x + m], vel[a, x:x + m] = _band_pass(rms[a], *dist.band)
+        Px[x:x + m] = 1.0
+    out, j = {"velocity": vel, "reset": []}, n + m * len(axes)
+    for kind in kinds:
+        rate = vel.copy()  # A' = dv + v_d, D' = v_d
+        if kind == "average":
+            rate[0, 3] = rate[1, 4] = 1.0
+            out["reset"] = [j, j + 1]
+        Fx[:, j:j + 2, :] = rate
+        out[kind] = np.eye(N)[j:j + 2]
+        j += 2
+    return Fx, Qx, Px, out
+
+
 def _van_loan(F, Qc, T):
     """``Phi^-1 Qd`` and ``Phi^T`` of stacks (K, n, n): the upper-right and lower-right blocks of
     ``exp([[-F, Qc], [0, F^T]] T)`` (Van Loan), ``T`` (K,) s. The exponential is computed by its blocks (the
@@ -156,10 +264,11 @@ def _van_loan(F, Qc, T):
     return E12, E22
 
 
-def discretise(F, Qc, T):
+def discretise(F, Qc, T, reset=()):
     """Transitions ``Phi`` and square roots ``L`` of the process noise ``Qd = L L^T`` (U, n, n) over steps of ``T``
     (M,) s (Van Loan), and the index (M,) of each step's pair; one pair per step length when every step has the same
-    model (a static base)."""
+    model (a static base). The states ``reset`` (accumulators) restart from zero at every step: their columns of
+    ``Phi`` are zero."""
     n = F.shape[1]
     if np.all(F == F[0]) and np.all(Qc == Qc[0]):
         T, idx = np.unique(T, return_inverse=True)
@@ -169,6 +278,7 @@ def discretise(F, Qc, T):
     E12, E22 = _van_loan(F, Qc, T)
     Phi = np.swapaxes(E22, 1, 2)
     Qd = Phi @ E12
+    Phi[:, :, list(reset)] = 0.0
     Qd = 0.5 * (Qd + np.swapaxes(Qd, 1, 2))
     # Qd = L L^T from the eigen-decomposition of Qd scaled to a unit diagonal (its entries span
     # many orders of magnitude: rad^2, (m/s)^2, bias units); the rows of states without process noise (a random
@@ -180,22 +290,46 @@ def discretise(F, Qc, T):
     return Phi, dq[:, :, None] * V * np.sqrt(np.clip(lam, 0.0, None))[:, None, :], idx
 
 
-def vref_rows(M, n, r_sd):
-    """The per-increment reference as measurements: at every step end dvE, dvN with stds ``r_sd`` (2,) m/s. Returns
-    the measuring steps (M,), ``H`` (M, 2, n) and the stds (M, 2)."""
-    H = np.zeros((2, n))
-    H[0, 3] = H[1, 4] = 1.0
+def vref_factor(t_end, T, vref_dt, schedules):
+    """The mean variance factor (M,) of the reference samples of each step of ``T`` s ending at ``t_end`` (M,) s,
+    samples every ``vref_dt`` s from ``vref_dt`` on, under ``schedules`` (``start``, ``end``, ``factor``: the
+    variance times ``factor`` for ``start <= t < end``), 1 without."""
+    q = np.ones(t_end.size)
+    if not len(schedules):
+        return q
+    ts = vref_dt * np.arange(1, int(np.floor(t_end[-1] / vref_dt + 1e-9)) + 1)
+    qs = np.ones(ts.size)
+    for s in schedules:
+        try:
+            start, end, factor = float(s.start), float(s.end), float(s.factor)
+        except (AttributeError, TypeError, ValueError):
+            raise bound_error("vref_schedules", "NoiseSchedule items (start, end, factor)", repr(s)) from None
+        qs = np.where((ts >= start) & (ts < end), qs * factor, qs)
+    step = np.clip(np.ceil(ts / T - 1e-9).astype(int) - 1, 0, t_end.size - 1)
+    n = np.bincount(step, minlength=t_end.size)
+    return np.where(n > 0, np.bincount(step, qs, minlength=t_end.size) / np.maximum(n, 1), q)
+
+
+def vref_rows(M, n, r_sd, H=None):
+    """The per-increment reference as measurements: at every step end dvE, dvN (or the rows ``H`` (2, n): the step's
+    average of dv and an unreported disturbance) with stds ``r_sd`` (2,) or (M, 2) m/s. Returns the measuring steps
+    (M,), ``H`` (M, 2, n) and the stds (M, 2)."""
+    if H is None:
+        H = np.zeros((2, n))
+        H[0, 3] = H[1, 4] = 1.0
     return np.arange(M), np.broadcast_to(H, (M, 2, n)), np.broadcast_to(r_sd, (M, 2))
 
 
-def aiding_rows(aiding, duration, k, n, site, trajectory, C_bn):
+def aiding_rows(aiding, duration, k, n, site, trajectory, C_bn, disturbance=None):
     """A receiver's rows as measurements (the horizontal rows of the antenna's velocity and/or position, at their
     time of validity; the latency does not change the information).
 
     The antenna's velocity error is ``dv + [u x] phi`` with ``u = C_bn (omega_nb^b x l)`` (zero on a fixed base,
     whose rows say it is at rest) and its position error ``dp + [d x] phi`` with ``d = C_bn l`` (ENU), from
-    ``C_est (omega x l) = (I - [phi x]) u``. Returns the steps ending at a row (K,) (epoch j ends step j k), ``H``
-    (K, m, n) (velocity rows first) and the rows' stds (K, m), m/s and m, scaled by the aiding's schedules."""
+    ``C_est (omega x l) = (I - [phi x]) u``; on a fixed base with an unreported disturbance, plus its velocity and
+    displacement (``disturbance``: the ``"velocity"`` and ``"position"`` (2, n) rows of :func:`disturbance_block`).
+    Returns the steps ending at a row (K,) (epoch j ends step j k), ``H`` (K, m, n) (velocity rows first) and the
+    rows' stds (K, m), m/s and m, scaled by the aiding's schedules."""
     from .aiding import lever_offset, lever_velocity
     from .aidingsim import epochs
 
@@ -217,12 +351,12 @@ def aiding_rows(aiding, duration, k, n, site, trajectory, C_bn):
         (C, w_nb), fixed = trajectory.attitude.attitude(tv), trajectory.translation.is_static()
     lever = np.asarray(aiding.lever_arm, dtype=float)
     H, sd = [], []
-    for sigma, col, lever_term, floor in (
-            (aiding.velocity_sigma, 3, None if fixed else lever_velocity(C, w_nb, lever), VREF_FLOOR),
-            (aiding.position_sigma, 5, lever_offset(C, lever), POSITION_FLOOR)):
+    for kind, sigma, col, lever_term, floor in (
+            ("velocity", aiding.velocity_sigma, 3, None if fixed else lever_velocity(C, w_nb, lever), VREF_FLOOR),
+            ("position", aiding.position_sigma, 5, lever_offset(C, lever), POSITION_FLOOR)):
         if sigma is None:
             continue
-        h = np.zeros((K, 2, n))
+        h = np.zeros((K, 2, n)) + (0.0 if disturbance is None else disturbance[kind])
         if lever_term is not None:
             h[:, :, 0:3] = attitude.skew(lever_term)[:, :2]
         h[:, 0, col] = h[:, 1, col + 1] = 1.0

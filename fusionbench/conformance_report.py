@@ -14,7 +14,7 @@ from matplotlib.colors import LogNorm  # noqa: E402
 from . import figures as fg  # noqa: E402
 from .figures import save_png  # noqa: E402
 from .imufiles import atomic_open  # noqa: E402
-from .runner import write_metrics  # noqa: E402
+from .run_metrics import write_metrics  # noqa: E402
 
 
 def _cell_text(c):

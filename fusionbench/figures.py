@@ -327,10 +327,12 @@ def events_note(events, scale=1.0, unit="s"):
     return "Events: " + "; ".join(parts) + "." if parts else ""
 
 
-def context(scn, metrics, times, bad=()):
-    """What every figure of a run shares: method names (those of ``times``, name to (M,) s) and colours, the
-    diverged methods ``bad`` (drawn apart), the events of the scenario and of the methods, the time unit, what the
-    scenario's kind draws (:func:`decorations`) and a title. Methods are instantiated through ``scn.method``."""
+def context(scn, metrics, times, bad=(), labels=None):
+    """What every figure of a run shares: method names (those of ``times``, name to (M,) s), their labels in legends
+    and notes (``labels``, name to label; default the names) and colours, the diverged methods ``bad`` (drawn
+    apart), the events of the scenario and of the methods, the time unit, what the scenario's kind draws
+    (:func:`decorations`) and a title (the runs and the duration run, "quick" for the reduced size). Methods are
+    instantiated through ``scn.method``."""
     duration = metrics["duration_s"]
     names = list(times)
     methods = {}
@@ -342,9 +344,11 @@ def context(scn, metrics, times, bad=()):
     init_given = getattr(scn, "init_misalignment", None) is not None
     events = scenario_events(scn, duration) + method_events(methods, init_given)
     scale, unit = time_axis(duration)
-    return SimpleNamespace(names=names, t=dict(times), colors=colors(names), bad=list(bad), methods=methods,
+    size = f"{metrics['runs']} runs of {duration / scale:g} {unit}{', quick' if metrics.get('quick') else ''}"
+    return SimpleNamespace(names=names, labels={n: (labels or {}).get(n, n) for n in names}, t=dict(times),
+                           colors=colors(names), bad=list(bad), methods=methods,
                            events=in_record(events, duration), scale=scale, unit=unit, deco=decorations(scn.kind),
-                           title=f"{metrics['scenario']} ({scn.kind}, {metrics['runs']} runs)")
+                           title=f"{metrics['scenario']} ({scn.kind}, {size})")
 
 
 def small_multiples(c, rows, values, sharex=True):
@@ -363,7 +367,7 @@ def small_multiples(c, rows, values, sharex=True):
                 v = values(n, key)
                 if v is None:
                     continue  # later lines thinner: one that coincides with an earlier one leaves its edges in view
-                median_band(ax, c.t[n] / c.scale, v, c.colors[n], n, lw=max(0.8, 2.0 - 0.3 * k))
+                median_band(ax, c.t[n] / c.scale, v, c.colors[n], c.labels.get(n, n), lw=max(0.8, 2.0 - 0.3 * k))
                 (own if n in c.bad else span).extend(spread(v[:, c.t[n] >= t_from]))
                 if n not in c.bad:
                     sizes.append(error_size(c.t[n], v))
@@ -393,7 +397,7 @@ def small_multiples(c, rows, values, sharex=True):
         axes[-1, j].set_xlabel(f"time ({c.unit})")
     top = set(axes[0, 0].get_legend_handles_labels()[1])
     for i in range(1, len(rows)):  # lines of reference below the first row: their own legend
-        hl = [(h, lab) for h, lab in zip(*axes[i, 0].get_legend_handles_labels()) if lab not in c.names]
+        hl = [(h, lab) for h, lab in zip(*axes[i, 0].get_legend_handles_labels()) if lab not in c.labels.values()]
         if hl and {lab for _, lab in hl} - top:
             axes[i, 0].legend(*zip(*hl), fontsize=7, loc="best")
     return fig, axes
@@ -401,9 +405,11 @@ def small_multiples(c, rows, values, sharex=True):
 
 def notes(c, extra=""):
     """The paragraphs under a run's figure: its events, ``extra``, and which methods are drawn apart."""
+    label = getattr(c, "labels", {})
     bad = (f"Diverged (error at the end over {DIVERGENCE_FACTOR:g} times the better half's): "
-           f"{', '.join(c.bad)}, drawn apart on its own scale." if c.bad else "")
-    return [events_note(c.events, c.scale, c.unit), extra, bad]
+           f"{', '.join(label.get(n, n) for n in c.bad)}, drawn apart on its own scale." if c.bad else "")
+    events = [Event(e.t0_s, e.t1_s, e.label, tuple(label.get(n, n) for n in e.methods), e.shade) for e in c.events]
+    return [events_note(events, c.scale, c.unit), extra, bad]
 
 
 def finish(fig, title, notes=(), fontsize=10):

@@ -8,7 +8,6 @@ and keeps the misalignment history of each run against truth. The figures of ``m
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import dataclass, field
@@ -21,9 +20,10 @@ from . import earth, metrics, streaming, units
 from .aiding import Aiding
 from .aidingsim import simulate_aiding
 from .aligner import call_align, check_time_rule
+from .bound import scenario_bound
 from .imudata import IMUData
-from .imufiles import atomic_open
 from .progress import bar as progress_bar
+from .run_metrics import run_metrics
 
 #: Longest history kept per method for figures (points).
 HISTORY_POINTS = 400
@@ -56,6 +56,8 @@ class MethodOutcome:
 
     Attributes
     ----------
+    name : str
+        Its label in metrics.json and the report (:func:`method_labels`).
     t : ndarray, shape (M,)
         History times, s (at most HISTORY_POINTS of the method's own).
     phi : ndarray, shape (R, M, 3)
@@ -85,7 +87,8 @@ class MethodOutcome:
 
 @dataclass
 class RunOutput:
-    """A finished scenario run: its metrics (the metrics.json mapping) and the methods' histories."""
+    """A finished scenario run: its metrics (the metrics.json mapping) and the methods' histories (by the names they
+    were given by; their labels in the metrics: ``MethodOutcome.name``)."""
 
     scenario: object
     metrics: dict
@@ -221,6 +224,14 @@ def scenario_limits(scn, traj, t, C_bn):
     return np.stack([np.interp(t, t_grid, limit[:, i]) for i in range(3)], axis=-1)
 
 
+def method_labels(scn, methods):
+    """``{given: label}``: the label in metrics.json and the report of each method of ``methods`` (the names it was
+    given by): a ``module:Class`` path's object's ``name``, unless another method of the run has it (then the path);
+    a registered name or a scenario's variant is its own label."""
+    labels = {m: (getattr(scn.method(m), "name", m) if ":" in m and m not in scn.variants else m) for m in methods}
+    taken = list(labels.values())
+    return {m: (lab if taken.count(lab) == 1 else m) for m, lab in labels.items()}
+
 
 def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end, first_run=0):
     """Settling of a method that is not causal (a smoother), per run: its final azimuth error on the prefixes of
@@ -285,6 +296,7 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     methods = list(methods or scn.methods)
     for m in methods:  # fail early, with the method's own message
         scn.method(m)
+    labels = method_labels(scn, methods)
     duration, default_runs = scn.sized(quick)
     runs = default_runs if runs is None else int(runs)
     if runs < 1:
@@ -326,6 +338,7 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
 
     traj = scn.trajectory(duration)
     limits = scenario_limits(scn, traj, [duration], traj.truth([duration]).C_bn)[0]
+    bound = scenario_bound(scn, traj, duration)  # None but for an alignment kind
     outcomes, refused = {}, {}
     for name in methods:
         parts = [r[name] for r in results]
@@ -337,51 +350,7 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         per_run = {key: ({k: join(lambda p: p.per_run[key][k]) for k in val} if isinstance(val, dict)
                          else join(lambda p: p.per_run[key])) for key, val in first.per_run.items()}
         series = {key: join(lambda p: p.series[key]) for key in first.series}
-        outcomes[name] = MethodOutcome(name, first.description, first.t, join(lambda p: p.phi),
+        outcomes[name] = MethodOutcome(labels[name], first.description, first.t, join(lambda p: p.phi),
                                        sum(p.wall_s for p in parts), per_run, series, first.figures)
-    return RunOutput(scn, _metrics(scn, outcomes, limits, runs, seed, quick, duration), outcomes, limits, refused)
-
-
-def _metrics(scn, outcomes, limits, runs, seed, quick, duration):
-    band = scn.settling_band_arcmin
-    out = {
-        "scenario": scn.name,
-        "runs": runs,
-        "seed": int(seed),
-        "duration_s": float(duration),
-        "quick": bool(quick),
-        "limits_arcmin": {ax: float(limits[i] / units.ARCMIN) for i, ax in enumerate("ENU")},
-        "methods": {},
-    }
-    for name, oc in outcomes.items():
-        phi_end = oc.per_run["phi_end"] / units.ARCMIN
-        settle = oc.per_run["settle"]
-        out["methods"][name] = {
-            "final_error_arcmin": {ax: metrics.stats(phi_end[:, i]) for i, ax in enumerate("ENU")},
-            # a smoother's settling is measured on the first PREFIX_RUNS runs only (NaN elsewhere)
-            "settling_time_s": {"U": metrics.stats(settle[np.isfinite(settle)]), "band_arcmin": band},
-            "settled_fraction_U": float(np.mean(oc.per_run["settled"])),
-            "wall_s": float(oc.wall_s),
-            "final_minus_limit_arcmin": {ax: float(np.mean(phi_end[:, i]) - limits[i] / units.ARCMIN)
-                                         for i, ax in enumerate("ENU")},
-            "level_rms_last_100s_arcmin": {ax: float(np.sqrt(oc.per_run["level_ms"][:, i].mean()) / units.ARCMIN)
-                                           for i, ax in enumerate("EN")},
-        }
-        sig = oc.per_run["sigma_end"]
-        if np.all(np.isfinite(sig)):  # filters: actual error over predicted sigma, RMS over runs
-            ratio = np.sqrt(np.mean((oc.per_run["phi_end"] / sig) ** 2, axis=0))
-            out["methods"][name]["consistency_rms_ratio"] = {ax: float(ratio[i]) for i, ax in enumerate("ENU")}
-        entry = out["methods"][name]
-        for feature in scn.features:
-            entry.update(feature.summarise(oc.per_run))
-        entry.update(oc.figures)
-    for feature in scn.features:
-        out.update(feature.summarise_run(out, outcomes))
-    return out
-
-
-def write_metrics(path, metrics_dict):
-    """Write metrics.json atomically (indent 1, keys in insertion order)."""
-    with atomic_open(path) as fh:
-        json.dump(metrics_dict, fh, indent=1)
-        fh.write("\n")
+    return RunOutput(scn, run_metrics(scn, outcomes, limits, runs, seed, quick, duration, bound), outcomes, limits,
+                     refused)

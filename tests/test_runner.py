@@ -103,7 +103,9 @@ def test_metrics_follow_the_contract_and_the_report_is_written(tmp_path):
     r = m["methods"]["coarse"]
     for ax in "ENU":
         assert set(r["final_error_arcmin"][ax]) == {"mean", "std", "rms", "max_abs"}
-    assert set(r["settling_time_s"]) == {"U", "band_arcmin"} and "wall_s" in r
+    assert set(r["settling_time_s"]) <= {"U", "band_arcmin", "U_settled"} and "wall_s" in r
+    # an alignment scenario: the attainable bound and each method's efficiency against it
+    assert set(m["bound_arcmin"]) == {"E", "N", "U"} and r["efficiency_U"] > 0
     assert 0.0 <= r["settled_fraction_U"] <= 1.0
     # coarse alignment of a tactical IMU: level errors at the accelerometer-bias limit within noise
     assert abs(r["final_error_arcmin"]["E"]["mean"] - m["limits_arcmin"]["E"]) < 0.5
@@ -291,7 +293,8 @@ def test_smoother_settling_on_the_first_runs_whatever_the_batching(tmp_path):
     s1, s2 = one.outcomes[smoother].per_run["settle"], split.outcomes[smoother].per_run["settle"]
     assert PREFIX_RUNS == 5 and np.all(np.isfinite(s1[:5])) and np.all(np.isnan(s1[5:]))
     assert np.array_equal(s1, s2, equal_nan=True)
-    assert one.metrics["methods"][smoother]["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(s1[:5]))
+    # metrics.json labels it by its name, not its import path
+    assert one.metrics["methods"]["whole-record-coarse"]["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(s1[:5]))
     assert one.outcomes[smoother].per_run["settled"].shape == (7,)  # inside the band at the end: known for every run
 
 
@@ -321,3 +324,44 @@ def test_a_shared_bar_advances_by_finished_runs(n_jobs):
     assert progress.expected_runs(scn, 5, True) == 5
     conf = scenarios.get("conformance")
     assert progress.expected_runs(conf, None, True) == 3 * len(conf.conditions)
+
+
+USER_METHODS = '''
+from fusionbench.coarse import CoarseAligner
+
+
+class Mine(CoarseAligner):
+    name = "my-coarse"
+
+
+class Named(CoarseAligner):
+    name = "coarse"
+'''
+
+
+def test_a_user_method_is_labelled_by_its_name(tmp_path, monkeypatch):
+    # a module:Class method appears in metrics.json and the report by its name; the path stays where it was given
+    # (RunOutput.outcomes) and beside the name in the report's list of methods
+    (tmp_path / "fb_label_user.py").write_text(USER_METHODS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    p = tmp_path / "tiny.toml"
+    p.write_text(TOML)
+    scn = scenarios.load(p)
+    out = run_scenario(scn, methods=["coarse", "fb_label_user:Mine"], runs=2, seed=1, progress=False)
+    assert list(out.metrics["methods"]) == ["coarse", "my-coarse"]
+    assert out.outcomes["fb_label_user:Mine"].name == "my-coarse"
+    mine, coarse = out.metrics["methods"]["my-coarse"], out.metrics["methods"]["coarse"]
+    assert mine["final_error_arcmin"] == coarse["final_error_arcmin"]  # the same algorithm on the same data
+    write_scenario_report(out, tmp_path / "rep")
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "\n| my-coarse | " in text and "- `my-coarse` (`fb_label_user:Mine`):" in text
+    assert "| fb_label_user:Mine |" not in text
+    # a name another method of the run has: the path, so that neither hides the other
+    out = run_scenario(scn, methods=["coarse", "fb_label_user:Named"], runs=2, seed=1, progress=False)
+    assert list(out.metrics["methods"]) == ["coarse", "fb_label_user:Named"]
+    # alone, a user's class named like a registered method is checked against that method's reference
+    ref = run_scenario(scn, methods=["coarse"], runs=2, seed=1, progress=False).metrics
+    alone = run_scenario(scn, methods=["fb_label_user:Named"], runs=2, seed=1, progress=False).metrics
+    assert list(alone["methods"]) == ["coarse"] and compare(alone, ref) == []
+    ref["methods"]["kf"] = ref["methods"]["coarse"]
+    assert [r[:2] for r in compare(alone, ref)] == [("kf", "method missing from run")]

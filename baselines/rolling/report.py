@@ -10,7 +10,7 @@ from fusionbench import units
 from fusionbench.figures import plt, save_png
 from fusionbench.imufiles import atomic_open
 from fusionbench.report import paper_section
-from fusionbench.runner import write_metrics
+from fusionbench.run_metrics import write_metrics
 
 from . import model
 
