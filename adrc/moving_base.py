@@ -680,6 +680,8 @@ class ESOTDAligner(AlignerBase):
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05,
                         aiding=("velocity", "position"), min_aiding_hz=1.0, max_outage_s=30.0)
     max_latitude_deg = MAX_LATITUDE_DEG  # eq. 12 divides by the horizontal earth rate
+    # a given init: 10 deg of yaw recovered, 20 deg left 52-56 arcmin of azimuth (static, 34 N, navigation, 300 s)
+    init_capture_deg = 8.0
     description = ("ESO/TD alignment (seed 001): 2nd-order ESO per level velocity channel, the azimuth from "
                    "eq. 12's derivative (least-squares TD); moving base with velocity or position aiding, static or "
                    "swaying without")
@@ -786,9 +788,12 @@ class ESOTDAligner(AlignerBase):
         R = imu.runs
         if init is None:  # any heading: inertial-frame coarse alignment first (with the aiding, if any)
             coarse = InertialCoarseAligner(history_points=20, caller=self.name)
-            # the fine stage through align: the input policy again, on the rest of the record
+            # the fine stage after the input policy again, on the rest of the record (its own coarse start needs no
+            # check of init)
             return coarse_then_fine(imu, site, aiding, coarse, self.coarse_s,
-                                    lambda rest, aid, C0, t_hand: self.align(rest, site, init=C0, aiding=aid))
+                                    lambda rest, aid, C0, t_hand: self._align(rest, site,
+                                                                              *self.check(rest, site, init=C0,
+                                                                                          aiding=aid)))
         dt = imu.dt
         m = max(1, int(round(self.step_s / dt)))
         h = m * dt

@@ -23,6 +23,9 @@ expected and what was found: ``"kf: site latitude: expected a latitude between -
 7. **a base that moves**: without aiding of its motion (none, or only rows at rest), an aligner checks that the
    record is of a stationary or swaying base (:func:`fusionbench.motion.check_stationary`) and refuses one that
    moves anywhere in it, naming ``--aiding``.
+8. **a given init the method cannot recover from**: a method that declares :attr:`~AlignerBase.init_capture_deg`
+   (a linearised fine aligner) checks ``init`` against a coarse solution of the record's first seconds
+   (:func:`fusionbench.init_check.check_capture`) and refuses one beyond its capture range, naming ``init``.
 
 What only a method can judge (a step the data's sample interval cannot carry) it checks in ``_align``, with
 messages of the same form.
@@ -69,6 +72,10 @@ class AlignerBase:
     uses_aiding : bool
         Whether the method consumes the aiding of a moving base (velocity or position rows at their epochs, with
         the lever arm and the latency); False: it takes only rows at rest.
+    init_capture_deg : float or None
+        The largest error of a given initial attitude the method recovers from, deg (a rotation angle); None: any
+        (a compass loop, a graph) or it takes none. With a value, a given ``init`` is checked (policy step 8) over
+        the method's ``coarse_s`` seconds (60 without one).
     """
 
     name: str
@@ -77,6 +84,7 @@ class AlignerBase:
     max_latitude_deg: float = 90.0
     spec = None
     uses_aiding: bool = False
+    init_capture_deg = None
     #: Options that must be positive (besides being of their default's kind): the update interval at least.
     positive_options: tuple = ("step_s",)
 
@@ -113,6 +121,10 @@ class AlignerBase:
         """Apply the input policy (module docstring), then align (:meth:`_align`); arguments as
         :meth:`fusionbench.aligner.Aligner.align`."""
         aiding, init = self.check(imu, site, vref, init, aiding)
+        if init is not None and self.init_capture_deg is not None:
+            from .init_check import check_capture
+
+            check_capture(self, imu, site, aiding, init, getattr(self, "coarse_s", 60.0))
         return self._align(imu, site, aiding, init)
 
     def check(self, imu: IMUData, site: Site, vref=None, init=None, aiding=None):
