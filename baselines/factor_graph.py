@@ -274,6 +274,11 @@ def _scalar_or_axes(x):
     return float(x[0]) if np.all(x == x[0]) else x.copy()
 
 
+#: Walk of a bias the model holds constant beside others that walk, per sqrt(s), as a fraction of its prior: 1e-3 of
+#: the prior over an hour.
+STILL_WALK = 1e-3 / np.sqrt(3600.0)
+
+
 class FactorGraphAligner(AlignerBase):
     """Factor-graph fine alignment (method ``gtsam``): gtsam ImuFactors with earth-rate Coriolis,
     velocity factors from every reference sample and a bias with zero-mean priors, solved by
@@ -452,6 +457,11 @@ class FactorGraphAligner(AlignerBase):
         K = t_kf.size
         if not np.any(walk > 0):
             return np.zeros(K - 1, int), walk
+        # an axis whose bias does not walk beside one that does (an identified spec: the accelerometers' rate
+        # random walk found, the gyros' not) walks by 1e-3 of its prior over an hour: as constant as the record can
+        # tell, where a zero sigma made the between factor's weight infinite and LM stop at its start
+        prior = np.r_[np.broadcast_to(self.accel_bias_sigma, (3,)), np.broadcast_to(self.gyro_bias_sigma, (3,))]
+        walk = np.where(walk > 0, walk, STILL_WALK * prior)
         n = max(1, int(round((t_kf[-1] - t_kf[0]) / self.bias_interval_s)))
         seg = np.minimum(((t_kf[:-1] - t_kf[0]) / self.bias_interval_s).astype(int), n - 1)
         return seg, walk * np.sqrt(self.bias_interval_s)
