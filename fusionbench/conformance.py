@@ -87,6 +87,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
         claimed = list(names) if matrix.run_unclaimed else [n for n in names if n in covered]
         conditions[cond.name] = {"base": cond.base, "lat_deg": cond.lat_deg, "heading_deg": cond.heading_deg,
                                  "imu": scn.imu_spec.name, "vref_sigma_mps": cond.vref_sigma_mps, "expect": cond.expect,
+                                 "init_error_deg": cond.init_error_deg,
                                  "gyro_bias_ratio": float(ratio),
                                  "bound_arcmin": _axes(bound / units.ARCMIN), "settling_band_arcmin": band}
         if cond.receiver:
@@ -131,7 +132,8 @@ def _axes(v, keys="ENU"):
 def _cell(matrix, cond, name, out, bound):
     """The figures and the verdict of one method on one condition."""
     if name in out.refused:
-        ok = cond.expect == "refuse"
+        ok = cond.expect == "refuse" or (cond.refuses_init(out.scenario.method(name))
+                                         and ": init: " in out.refused[name])
         return {"status": "pass" if ok else "fail", "refused": True, "message": out.refused[name]}
     oc = out.outcomes[name]
     err = oc.per_run["phi_end"] - out.limits  # (R, 3) rad: final error minus limit
@@ -143,6 +145,10 @@ def _cell(matrix, cond, name, out, bound):
             "settled_fraction": float(np.mean(oc.per_run["settled"])), "wall_s": float(oc.wall_s)}
     if cond.expect == "refuse":
         cell.update(status="fail", message="gave a heading where the azimuth is unobservable")
+        return cell
+    if cond.refuses_init(out.scenario.method(name)):
+        cell.update(status="fail", message=f"aligned from an init {cond.init_error_deg:g} deg off, beyond the "
+                                           f"{out.scenario.method(name).init_capture_deg:g} deg it declares it recovers from")
         return cell
     level_tol = np.maximum(matrix.level_tolerance_arcmin, matrix.threshold(name) * bound[:2] / units.ARCMIN)
     cell["level_tolerance_arcmin"] = _axes(level_tol, "EN")

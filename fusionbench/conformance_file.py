@@ -34,7 +34,7 @@ _TOP = {"name", "description", "kind", "experiment", "duration_s", "rate_hz", "r
 #: Longitude (deg) and height (m) of a condition when the matrix gives no ``[site]``.
 DEFAULT_LON_DEG, DEFAULT_HEIGHT_M = 108.0, 100.0
 _CONDITION_KEYS = {"name", "base", "lat_deg", "heading_deg", "imu", "vref_sigma_mps", "expect", "aiding",
-                   "aiding_rate_hz", "position_sigma_m", "lever_arm_m", "delay_s", "outage_s"}
+                   "aiding_rate_hz", "position_sigma_m", "lever_arm_m", "delay_s", "outage_s", "init_error_deg"}
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,9 @@ class Condition:
     absolute path of an IMU spec file. On a moving base: what the receiver measures (``aiding``, :data:`AIDING`), at
     ``aiding_rate_hz`` (None: at every increment, the per-increment reference), with ``vref_sigma_mps`` and
     ``position_sigma_m`` of noise, from an antenna at ``lever_arm_m`` (body RFU), ``delay_s`` late, and an outage of
-    ``outage_s`` from half the record on (both given to the method)."""
+    ``outage_s`` from half the record on (both given to the method). ``init_error_deg``: every method is handed an
+    initial attitude, the truth turned by this much in azimuth (None: each starts on its own); a method that
+    declares a smaller capture range (``init_capture_deg``) must refuse it, naming ``init``."""
 
     name: str
     base: str
@@ -60,6 +62,13 @@ class Condition:
     lever_arm_m: tuple = (0.0, 0.0, 0.0)
     delay_s: float = 0.0
     outage_s: float = 0.0
+    init_error_deg: float | None = None
+
+    def refuses_init(self, method) -> bool:
+        """Whether ``method`` must refuse this condition's initial attitude: one beyond the capture range it
+        declares (:attr:`fusionbench.aligner_base.AlignerBase.init_capture_deg`)."""
+        capture = getattr(method, "init_capture_deg", None)
+        return self.init_error_deg is not None and capture is not None and abs(self.init_error_deg) > capture
 
     @property
     def kind(self):
@@ -180,7 +189,9 @@ def parse(data, src="<conformance>"):
             fields.number(c, "vref_sigma_mps", src, 0.0, lo=0.0, hi=10.0, label=f"{label}.vref_sigma_mps"), expect,
             fields.number(site, "lon_deg", src, DEFAULT_LON_DEG, lo=-360.0, hi=360.0, label="site.lon_deg"),
             fields.number(site, "height_m", src, DEFAULT_HEIGHT_M, lo=-1e4, hi=1e5, label="site.height_m"),
-            **_receiver(c, src, label, BASES[base][0], duration, rate)))
+            **_receiver(c, src, label, BASES[base][0], duration, rate),
+            init_error_deg=(fields.number(c, "init_error_deg", src, lo=-180.0, hi=180.0, label=f"{label}.init_error_deg")
+                            if "init_error_deg" in c else None)))
     return Matrix(name, str(data.get("description", "")), tuple(conds), duration, rate, runs,
                   fields.number(quick, "duration_s", src, duration, lo=10.0, hi=duration, label="quick.duration_s"),
                   int(fields.number(quick, "runs", src, float(min(runs, 3)), lo=1, hi=runs, label="quick.runs")),
@@ -226,6 +237,8 @@ def condition_scenario(matrix, cond, quick=False, band_arcmin=None):
          "imu": cond.imu,
          "vref": {"sigma_mps": [cond.vref_sigma_mps] * 3},
          "metrics": {"settling_band_arcmin": matrix.settling_band_arcmin if band_arcmin is None else band_arcmin}}
+    if cond.init_error_deg is not None:  # the truth turned in azimuth (platform angles: the third is about up)
+        d["init"] = {"misalignment_deg": [0.0, 0.0, cond.init_error_deg]}
     if cond.base == "moving":
         h = np.radians(cond.heading_deg)
         d["motion"] = {"segments": [{"accel_mps2": [MOVING_ACCEL * np.sin(h), MOVING_ACCEL * np.cos(h), 0.0],

@@ -108,7 +108,9 @@ def write_report(out, folder):
         cond_rows.append(f"| {name} | {c['base']} | {c['lat_deg']:g} | {c['heading_deg']:g} | {c['imu']} | "
                          f"{c['vref_sigma_mps']:g} | {_aiding_text(c)} | {'-' if lim is None else f'{lim:.2f}'} | "
                          f"{b['E']:.3f} / {b['N']:.3f} / {b['U']:.2f} | {c['settling_band_arcmin']:.1f} |"
-                         + (" refuse expected" if c["expect"] == "refuse" else ""))
+                         + (" refuse expected" if c["expect"] == "refuse" else "")
+                         + (f" init given {c['init_error_deg']:g} deg off in azimuth"
+                            if c.get("init_error_deg") is not None else ""))
     fails = [f"- `{n}` on {c}: {cell.get('message', '')}" + ("" if cell.get("claimed", True) else " (outside its claim)")
              for n in methods for c, cell in m["cells"][n].items() if cell["status"] == "fail"]
     unclaimed_note = (", ° a cell outside the method's claim, run because the file asks for every method everywhere "

@@ -165,3 +165,69 @@ def test_matrix_file_errors_name_the_field(tmp_path):
     p.write_text(MATRIX.format(offset=OFFSET).replace('base = "sway-mild"', 'base = "wobbly"'))
     with pytest.raises(FieldError, match=r"condition\[2\]\.base"):
         scenarios.load(p)
+
+
+class DeclaredCaptureCoarse(CoarseAligner):
+    """The coarse aligner declaring a capture range it does not check: it aligns from its own start whatever init
+    it is handed, so a condition beyond that range must fail it."""
+
+    name = "declared-capture-coarse"
+    init_capture_deg = 10.0
+
+    def align(self, imu, site, vref=None, init=None, aiding=None):  # the input policy without the init check
+        aiding, _ = self.check(imu, site, vref, None, aiding)
+        return self._align(imu, site, aiding, None)
+
+
+INIT_MATRIX = """
+name = "init-mini"
+experiment = "conformance"
+duration_s = 120.0
+rate_hz = 10.0
+runs = 2
+methods = ["kf", "eso-td", "pid", "tests.test_conformance:DeclaredCaptureCoarse"]
+[conformance]
+efficiency = { default = 3.0, kf = 1.5 }
+[[condition]]
+name = "init180"
+base = "static"
+lat_deg = 34.0
+heading_deg = 60.0
+imu = "navigation"
+init_error_deg = 180.0
+[[condition]]
+name = "init20"
+base = "static"
+lat_deg = 34.0
+heading_deg = -30.0
+imu = "navigation"
+init_error_deg = 20.0
+"""
+
+
+def test_a_wrong_init_is_a_condition_refused_within_the_declared_capture_and_recovered_from_elsewhere(tmp_path):
+    # handed the truth turned 180 deg: kf and eso-td (capture 30 and 8 deg) pass by refusing it naming init; pid
+    # (no capture range: a compass loop turns from any heading) aligns and is scored; a method that declares 10 deg
+    # but aligns anyway fails. 20 deg off: kf (30) aligns and is scored, eso-td (8) refuses and passes
+    p = tmp_path / "init.toml"
+    p.write_text(INIT_MATRIX)
+    matrix = scenarios.load(p)
+    assert [c.init_error_deg for c in matrix.conditions] == [180.0, 20.0]
+    out = run_scenario(matrix, seed=2, progress=False)
+    cells = out.metrics["cells"]
+    for name in ("kf", "eso-td"):
+        cell = cells[name]["init180"]
+        assert cell["status"] == "pass" and cell["refused"] and cell["message"].startswith(f"{name}: init: ")
+    assert cells["eso-td"]["init20"]["refused"] and cells["eso-td"]["init20"]["status"] == "pass"
+    for name, cond in (("pid", "init180"), ("kf", "init20")):
+        assert not cells[name][cond]["refused"] and "efficiency_U" in cells[name][cond]
+    declared = cells["tests.test_conformance:DeclaredCaptureCoarse"]
+    assert declared["init180"]["status"] == "fail" and "beyond the 10 deg it declares" in declared["init180"]["message"]
+    assert declared["init20"]["status"] == "fail"
+    assert out.metrics["conditions"]["init180"]["init_error_deg"] == 180.0
+    # the init handed over is the truth turned by that much about the vertical: a rotation of 180 deg whose axis is up
+    scn = out.runs["init180"].scenario
+    C = scn.trajectory(120.0).truth([0.0]).C_bn[0]
+    turn = scn.initial_guess(C) @ C.T
+    assert np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))) == pytest.approx(180.0, abs=1e-6)
+    assert turn[2, 2] == pytest.approx(1.0, abs=1e-12)
