@@ -5,9 +5,10 @@ A condition is a base (static, a mild sway, seed 000's Table-1 sway, or a vehicl
 its heading with a velocity reference), a latitude, a true heading, an IMU preset and the noise of the velocity
 reference. The matrix file lists about twenty of them so that every level of every factor appears, not the full
 product. Each condition becomes an ordinary alignment scenario (:func:`condition_scenario`) run by
-:func:`fusionbench.runner.run_alignment`: the methods start on their own (no initial guess), get the reference
-only where the base moves or the reference is noisy, and get the condition's IMU as their model; a method runs
-only on the conditions its ``supports`` claims (:class:`fusionbench.claims.Supports`).
+:func:`fusionbench.runner.run_alignment`: the methods start on their own (no initial guess but on a condition's
+``init_error_deg``: the truth turned by that much, which a method declaring a smaller capture range must refuse),
+get the reference only where the base moves or the reference is noisy, and get the condition's IMU as their model;
+a method runs only on the conditions its ``supports`` claims (:class:`fusionbench.claims.Supports`).
 
 Each cell (method x condition) is scored at the last sample, over the Monte Carlo runs:
 

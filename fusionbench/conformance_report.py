@@ -129,7 +129,9 @@ def write_report(out, folder):
 {matrix.description}
 
 Runs: {m['runs']} per condition (seed {m['seed']}{', quick size' if m['quick'] else ''}), {m['duration_s']:.0f} s at
-{matrix.rate_hz:g} Hz, every method from its own start (no initial guess), given the condition's IMU as its model.
+{matrix.rate_hz:g} Hz, every method from its own start (no initial guess; a condition with an init error hands
+each the truth turned by that much, and a method that declares a smaller capture range passes by refusing it),
+given the condition's IMU as its model.
 A cell is the azimuth **efficiency**: the RMS over runs of (final azimuth error - theoretical limit) divided by the
 attainable bound (the standard deviation an optimal estimator reaches with this IMU's noise; 1 is optimal). A cell
 passes when the efficiency is at most the method's threshold and the level errors are within
