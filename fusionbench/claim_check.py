@@ -122,8 +122,8 @@ def outside_claim(method, imu, site, aiding=None, spec=None) -> str | None:
     the kind of base (:func:`base_kind`: moving with aiding of a moving base, else static or sway from the gyros),
     the site's latitude, the gyro bias of ``spec`` over the horizontal earth rate
     (:func:`~fusionbench.claims.azimuth_bias_ratio`; on a moving base against ``max_bias_ratio_moving`` when the
-    method claims one), and on a moving base the aiding kinds, the rows' rate (:meth:`~fusionbench.aiding.Aiding.rate_hz`)
-    and their longest outage (:func:`aiding_outage`). A method that claims no condition (a paper's printed variant,
+    method claims one), and on a moving base the aiding kinds, the rows' rate
+    (:meth:`~fusionbench.aiding.Aiding.rate_hz`) and their longest outage (:func:`aiding_outage`). A method that claims no condition (a paper's printed variant,
     a navigator) is always outside.
 
     Parameters

@@ -147,9 +147,10 @@ def _cell(matrix, cond, name, out, bound):
     if cond.expect == "refuse":
         cell.update(status="fail", message="gave a heading where the azimuth is unobservable")
         return cell
-    if cond.refuses_init(out.scenario.method(name)):
+    method = out.scenario.method(name)
+    if cond.refuses_init(method):
         cell.update(status="fail", message=f"aligned from an init {cond.init_error_deg:g} deg off, beyond the "
-                                           f"{out.scenario.method(name).init_capture_deg:g} deg it declares it recovers from")
+                                           f"{method.init_capture_deg:g} deg it declares it recovers from")
         return cell
     level_tol = np.maximum(matrix.level_tolerance_arcmin, matrix.threshold(name) * bound[:2] / units.ARCMIN)
     cell["level_tolerance_arcmin"] = _axes(level_tol, "EN")

@@ -190,8 +190,8 @@ def parse(data, src="<conformance>"):
             fields.number(site, "lon_deg", src, DEFAULT_LON_DEG, lo=-360.0, hi=360.0, label="site.lon_deg"),
             fields.number(site, "height_m", src, DEFAULT_HEIGHT_M, lo=-1e4, hi=1e5, label="site.height_m"),
             **_receiver(c, src, label, BASES[base][0], duration, rate),
-            init_error_deg=(fields.number(c, "init_error_deg", src, lo=-180.0, hi=180.0, label=f"{label}.init_error_deg")
-                            if "init_error_deg" in c else None)))
+            init_error_deg=(fields.number(c, "init_error_deg", src, lo=-180.0, hi=180.0,
+                                          label=f"{label}.init_error_deg") if "init_error_deg" in c else None)))
     return Matrix(name, str(data.get("description", "")), tuple(conds), duration, rate, runs,
                   fields.number(quick, "duration_s", src, duration, lo=10.0, hi=duration, label="quick.duration_s"),
                   int(fields.number(quick, "runs", src, float(min(runs, 3)), lo=1, hi=runs, label="quick.runs")),
