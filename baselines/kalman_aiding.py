@@ -324,7 +324,7 @@ def attitude_at_start(C_end, dth, dv, dt, site, aiding, t0, t1):
     ``C(t0) = exp([theta x]) C(t1) B_total^T``, with ``B_total`` the body's turn over the increments (the
     strapdown's own coning-compensated product, run with the navigation frame held) and ``theta`` the navigation
     frame's (ENU) turn: the earth rate at the ``site`` and the transport rate of the base's mean velocity over the
-    span, from ``aiding`` (:func:`mean_velocity`; the transport rate is linear in the velocity). The steps' rotations
+    span, from ``aiding`` (:func:`mean_velocity`; the transport rate is linear in the velocity; None: a fixed base). The steps' rotations
     do not share one axis (the transport rate turns with the velocity): their product differs from this by about
     the earth's turn times the transport rate's over the span, 6e-7 rad (0.002 arcmin) over a minute at 0.1 g."""
     R = dth.shape[0]
@@ -332,7 +332,8 @@ def attitude_at_start(C_end, dth, dv, dt, site, aiding, t0, t1):
     held = Strapdown(NavState.broadcast(R, np.eye(3), (0.0, 0.0, 0.0), site.lat, site.lon, site.h), dt,
                      position_fixed=True)
     held.run(dth, dv, omega_cmd=np.broadcast_to(-w_ie, (R, 3)), record_every=dth.shape[1])  # zeta = 0 each sample
-    theta = (w_ie + earth.transport_rate_n(mean_velocity(aiding, t0, t1, R), site.lat, site.h)) * (t1 - t0)
+    v = np.zeros((R, 3)) if aiding is None else mean_velocity(aiding, t0, t1, R)
+    theta = (w_ie + earth.transport_rate_n(v, site.lat, site.h)) * (t1 - t0)
     return rotvec_to_dcm(theta) @ C_end @ np.swapaxes(held.state.C_bn, -1, -2)
 
 

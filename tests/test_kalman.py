@@ -142,3 +142,30 @@ def tj_schedule():
     from fusionbench.imu import NoiseSchedule
 
     return NoiseSchedule(60.0, 100.0, 100.0)
+
+
+def test_fixed_base_fine_stage_has_the_whole_record_at_the_hand_over():
+    # changed: on a fixed base the fine stage started at the hand-over (60 s) from the coarse attitude, so its first
+    # reported attitude carried the coarse stage's level (27 arcmin RMS here) and a prior-sized sigma (300 arcmin in
+    # azimuth); now it re-runs the record from its start (the coarse attitude carried back there), so at the
+    # hand-over it holds what 60 s of data give an optimal estimator (fusionbench.bound.attainable_bound: 0.105 /
+    # 0.105 / 14.30 arcmin; the filter's sigma 0.104 / 0.104 / 14.31)
+    from fusionbench import bound
+
+    base = PRESETS["seed000"]
+    spec = IMUSpec(gyro=SensorErrors(bias_sigma=base.gyro.bias, white=base.gyro.white),
+                   accel=SensorErrors(bias_sigma=base.accel.bias, white=base.accel.white))
+    tr = static(123.0, 120.0)
+    runs = 40
+    data = simulate(tr, spec, 0.01, runs=runs, seed=5)
+    vref = simulate_vref(tr, VelocityReferenceSpec((0.01,) * 3), data.t, runs=runs, seed=5)
+    aligner = KalmanAligner(imu=spec, vref_sigma=0.01)
+    res = aligner.align(data, Site(LAT, 1.9, 450.0), vref=vref)
+    k = int(np.argmax(res.t > aligner.coarse_s))  # the first attitude of the fine stage, one filter step later
+    assert res.t[k] == pytest.approx(aligner.coarse_s + aligner.step_s, abs=0.011)
+    _, b = bound.attainable_bound(spec, res.t[k], trajectory=tr, vref_sigma=0.01)
+    sigma = np.sqrt(np.mean(res.sigma_phi[:, k] ** 2, axis=0))
+    assert sigma == pytest.approx(b[-1], rel=0.1)
+    phi = attitude.misalignment(res.C_bn[:, k], tr.truth([res.t[k]]).C_bn[0])
+    ratio = np.sqrt(np.mean(phi**2, axis=0)) / sigma  # 40 runs: an RMS ratio within about +-0.11 of 1 per axis
+    assert np.all((ratio > 0.7) & (ratio < 1.35)), ratio
