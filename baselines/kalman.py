@@ -172,7 +172,8 @@ class KalmanAligner(AlignerBase):
             motion = initial_motion(aiding, t_start, C0, dth[:, k] / imu.dt, site.lat, imu.runs,
                                     max(self.vref_sigma, SIGMA_FLOOR), max(self.aiding_position_sigma, SIGMA_FLOOR),
                                     float(np.sqrt(np.max(self._p0(site.lat)[:3]))))
-            return self._fine(rest, site, rows, C0, motion, imu.dt, aiding is None, after)
+            return self._fine(rest, site, rows, C0, motion, imu.dt, aiding is None, after,
+                              fixed_base=aiding is None or aiding.is_at_rest())
 
         if init is not None:
             return fine(imu, aiding, init, imu.t0, 0)
@@ -184,11 +185,13 @@ class KalmanAligner(AlignerBase):
             return fine(imu, aiding, C_start, imu.t0, 0, after=t_hand)
         return coarse_then_fine(imu, site, aiding, coarse, self.coarse_s, rerun)
 
-    def _fine(self, imu, site, aiding, C0, motion, dt, fixed, after=None) -> AlignmentResult:
+    def _fine(self, imu, site, aiding, C0, motion, dt, fixed, after=None, fixed_base=False) -> AlignmentResult:
         """The filter around the feedback-corrected strapdown from attitude ``C0`` (R, 3, 3) and ``motion`` (velocity,
         its sigma, position or None, its sigma: :func:`baselines.kalman_aiding.initial_motion`), on the rows of
         ``aiding`` (None: no row, prediction only), or the zero velocity of a fixed base when ``fixed`` (no aiding
-        at all), with sample interval ``dt`` (s); the history after ``after`` (s) only, when given."""
+        at all), with sample interval ``dt`` (s); the history after ``after`` (s) only, when given. On a
+        ``fixed_base`` (no aiding, or rows at rest) the bias states are navigation-frame ones
+        (:mod:`baselines.kalman_filter`)."""
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
         v0, sigma_v0, p0, sigma_p0 = motion
@@ -207,7 +210,8 @@ class KalmanAligner(AlignerBase):
             (p0[:, 0], p0[:, 1], np.where(np.isfinite(p0[:, 2]), p0[:, 2], site.h))  # rows without a height: the site's
         sd = Strapdown(NavState.broadcast(R, C0, v0, lat, lon, h), dt, height_fixed=True)
         P0 = self._p0(site.lat, sigma_v0, sigma_p0 if position else None)
-        kf = FeedbackKalman(sd, self._new_bank(R, P0), self._qc(), T, dt, self._q_scale, self._update)
+        kf = FeedbackKalman(sd, self._new_bank(R, P0), self._qc(), T, dt, self._q_scale, self._update,
+                            nav_biases=fixed_base)
         out_t = np.empty(steps + (tail > 0))
         out_C = np.empty((R, steps + (tail > 0), 3, 3))
         out_s = np.empty((R, steps + (tail > 0), 3))
