@@ -190,7 +190,7 @@ class KalmanAligner(AlignerBase):
         its sigma, position or None, its sigma: :func:`baselines.kalman_aiding.initial_motion`), on the rows of
         ``aiding`` (None: no row, prediction only), or the zero velocity of a fixed base when ``fixed`` (no aiding
         at all), with sample interval ``dt`` (s); the history after ``after`` (s) only, when given. On a
-        ``fixed_base`` (no aiding, or rows at rest) the bias states are navigation-frame ones
+        ``fixed_base`` (no aiding, or rows at rest) the accelerometer bias states are navigation-frame ones
         (:mod:`baselines.kalman_filter`)."""
         t, dth, dv = imu.increments()
         R, N, _ = dth.shape
@@ -211,7 +211,7 @@ class KalmanAligner(AlignerBase):
         sd = Strapdown(NavState.broadcast(R, C0, v0, lat, lon, h), dt, height_fixed=True)
         P0 = self._p0(site.lat, sigma_v0, sigma_p0 if position else None)
         kf = FeedbackKalman(sd, self._new_bank(R, P0), self._qc(), T, dt, self._q_scale, self._update,
-                            nav_biases=fixed_base)
+                            nav_accel_biases=fixed_base)
         out_t = np.empty(steps + (tail > 0))
         out_C = np.empty((R, steps + (tail > 0), 3, 3))
         out_s = np.empty((R, steps + (tail > 0), 3))

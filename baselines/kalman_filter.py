@@ -5,29 +5,23 @@ State per Monte Carlo run (the filters of all runs step together in a :class:`ba
     x = [phiE, phiN, phiU, dvE, dvN, eps_x, eps_y, eps_z, nab_x, nab_y, nab_z (, dpE, dpN)]
 
 (misalignment phi in ENU with C_est = (I - [phi x]) C_true, rad; horizontal velocity error, m/s; gyro and
-accelerometer biases, rad/s and m/s^2; the horizontal position error, m, only when the aiding measures positions),
-with the psi-angle model::
+accelerometer biases (frames below), rad/s and m/s^2; the horizontal position error, m, only when the aiding
+measures positions), with the psi-angle model::
 
-    phi' = -[w_in x] phi - B eps + w_g
+    phi' = -[w_in x] phi - C_bn eps + w_g
     dv'  =  [f^n x] phi + B nab - [(2 w_ie + w_en) x] dv + w_a      (east and north rows)
     dp'  =  dv
 
-The biases are body-frame states (``B = C_bn``) on a moving base, where the turns make them partly observable, and
-navigation-frame states (``B = I``) on a fixed one. There the horizontal accelerometer biases are unobservable
-against the tilts and the east gyro bias against the azimuth, and with body-frame states the unobservable directions
-turn with the estimated attitude: every correction and the gyro noise's wander of ``C_bn`` gave the filter spurious
-information on them. With a tactical IMU (300 ug, 1 deg/h) its north level then ended 1.0-1.8 arcmin beside the
-limit (0.1 with navigation-frame states) and, with only the gyro's white noise, its azimuth spread about a limit of
-3.8 deg was 158-174 arcmin against the optimal 79 (70 with navigation-frame states). A sway turns the body by a few
-degrees, which moves a navigation-frame bias by a few percent at the sway's frequency, averaged out in the level
-and azimuth channels.
-
-the transition and process noise accumulated over the update interval T (``step_s``; second-order expansion of
-exp(F T) and of the Van Loan integral). Each step predicts, then updates with the aiding rows valid in it
-(:func:`baselines.kalman_aiding.step_measurement`; prediction only when there are none) in filterpy's Joseph form.
-After each update the estimate is fed back: the attitude is turned by phi (C <- exp([phi x]) C), the velocity and
-position errors removed, the biases added to the compensation of later increments, and those states reset to zero
-(their covariance is unchanged).
+The gyro biases are body-frame states. The accelerometer biases are body-frame states (``B = C_bn``) on a moving
+base, where the turns make them partly observable, and navigation-frame states (``B = I``) on a fixed one. There
+the horizontal accelerometer biases are unobservable against the tilts, and body-frame states turn that unobservable
+direction with the estimated attitude: every correction and the gyro noise's wander of ``C_bn`` gave the filter
+spurious information on it. With a tactical IMU (300 ug, 0.1 deg/sqrt(h)) its north level then ended 1.0-1.8
+arcmin beside the limit, 0.1-0.3 with navigation-frame states (level bound 0.08-0.27). The same change for the gyro
+biases fails: an observable north gyro bias, estimated in the navigation frame and fed back to the body through an
+attitude whose azimuth is still being corrected, leaves part of it as an east bias (noise-free, 1 deg/h, from the
+true attitude: 71 arcmin of azimuth, 0.01 with body-frame states). A sway turns the body by a few degrees, which
+moves a navigation-frame bias by a few percent at the sway's frequency, averaged out in the level channels.
 """
 
 from __future__ import annotations
@@ -45,7 +39,7 @@ from .kalman_aiding import step_measurement
 NX = 11
 
 
-def error_model(C_bn, f_n, w_in, w_cor, position=False, nav_biases=False):
+def error_model(C_bn, f_n, w_in, w_cor, position=False, nav_accel_biases=False):
     """Continuous error-state matrix F (R, n, n) of the psi-angle model (module docstring); n = 11, or 13 with the
     position errors (east, north, m: ``dp' = dv``).
 
@@ -55,15 +49,16 @@ def error_model(C_bn, f_n, w_in, w_cor, position=False, nav_biases=False):
     w_in : (R, 3) navigation-frame rate, rad/s. w_cor : (R, 3) 2 w_ie + w_en, rad/s.
     position : bool
         Add the position-error states.
-    nav_biases : bool
-        The bias states in the navigation frame (ENU; ``B = I``), else in the body frame (RFU; ``B = C_bn``).
+    nav_accel_biases : bool
+        The accelerometer bias states in the navigation frame (ENU; ``B = I``), else in the body frame (RFU;
+        ``B = C_bn``).
     """
     R = C_bn.shape[0]
     n = NX + 2 * bool(position)
-    B = np.broadcast_to(np.eye(3), C_bn.shape) if nav_biases else C_bn
+    B = np.broadcast_to(np.eye(3), C_bn.shape) if nav_accel_biases else C_bn
     F = np.zeros((R, n, n))
     F[:, 0:3, 0:3] = -skew(w_in)
-    F[:, 0:3, 5:8] = -B
+    F[:, 0:3, 5:8] = -C_bn
     F[:, 3:5, 0:3] = skew(f_n)[:, :2]
     F[:, 3:5, 8:11] = B[:, :2]
     F[:, 3:5, 3:5] = -skew(w_cor)[:, :2, :2]
@@ -102,8 +97,8 @@ class FeedbackKalman:
     q_scale, update : callable
         The aligner's hooks: ``q_scale(bank)`` the factor (R,) on Q in the prediction, ``update(bank, z, H, r,
         chan, k)`` the measurement update k (the adaptive variant adapts R and Q there).
-    nav_biases : bool
-        Bias states in the navigation frame (a fixed base), else in the body frame (module docstring).
+    nav_accel_biases : bool
+        Accelerometer bias states in the navigation frame (a fixed base), else in the body frame (module docstring).
 
     Attributes
     ----------
@@ -117,9 +112,9 @@ class FeedbackKalman:
         Measurement updates so far.
     """
 
-    def __init__(self, sd, bank, qc, T, dt, q_scale, update, nav_biases=False):
+    def __init__(self, sd, bank, qc, T, dt, q_scale, update, nav_accel_biases=False):
         self.sd, self.bank, self.qc, self.T, self.dt = sd, bank, qc, T, dt
-        self.nav_biases = bool(nav_biases)
+        self.nav_accel_biases = bool(nav_accel_biases)
         self._q_scale, self._update = q_scale, update
         R = sd.runs
         self.z = np.zeros((R, 0))
@@ -155,7 +150,8 @@ class FeedbackKalman:
         f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
         w_ie = earth.earth_rate_n(st.lat)
         w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
-        F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en, position=nx > NX, nav_biases=self.nav_biases)
+        F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en, position=nx > NX,
+                         nav_accel_biases=self.nav_accel_biases)
         Qc = np.zeros((R, nx, nx))
         Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
         Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
@@ -178,14 +174,13 @@ class FeedbackKalman:
 
     def _feedback(self):
         """Feed the estimate into the strapdown (attitude, velocity, position) and the biases (navigation-frame
-        bias states taken to the body with the corrected attitude); reset it to zero."""
+        accelerometer bias states taken to the body with the corrected attitude); reset it to zero."""
         x = self.x.copy()
         self.bank.reset_x()  # feedback below resets every state
         st = self.sd.state
         st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
         st.v_n[:, :2] -= x[:, 3:5]
-        if self.nav_biases:  # b_body = C_bn^T b_nav
-            x[:, 5:8] = np.einsum("rji,rj->ri", st.C_bn, x[:, 5:8])
+        if self.nav_accel_biases:  # b_body = C_bn^T b_nav
             x[:, 8:11] = np.einsum("rji,rj->ri", st.C_bn, x[:, 8:11])
         self.eps_hat += x[:, 5:8]
         self.nab_hat += x[:, 8:11]
