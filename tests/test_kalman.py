@@ -212,3 +212,37 @@ def test_a_north_gyro_bias_does_not_turn_the_azimuth():
     err = attitude.misalignment(res.C_bn_final[0], C_end) - metrics.theoretical_limits(spec.gyro.bias, spec.accel.bias,
                                                                                         C_end, lat, 0.0)
     assert abs(err[2]) < 1.0 * units.ARCMIN, err / units.ARCMIN
+
+
+TACTICAL_SWAY = """
+name = "tactical-sway"
+experiment = "conformance"
+duration_s = 300.0
+rate_hz = 50.0
+runs = 20
+methods = ["kf"]
+run_unclaimed = true
+[conformance]
+level_tolerance_arcmin = 0.5
+efficiency = { default = 1.5 }
+[[condition]]
+name = "table1-equator-h0-tac"
+base = "sway-table1"
+lat_deg = 0.0
+heading_deg = 0.0
+imu = "tactical"
+vref_sigma_mps = 0.02
+"""
+
+
+def test_a_tactical_fine_stage_starts_at_the_hand_over(tmp_path):
+    # the fine stage re-runs the record from its start only when the IMU model allows the coarse stage an azimuth
+    # error within RERUN_MAX_DEG (tactical here: 16 deg): filtered from degrees off, the first minute cost more than it
+    # gave, 2.38 attainable bounds against 1.54 from the hand-over (20 runs scatter that by about +-0.16 x)
+    from fusionbench import scenarios
+    from fusionbench.experiment import run_scenario
+
+    p = tmp_path / "tactical-sway.toml"
+    p.write_text(TACTICAL_SWAY)
+    cell = run_scenario(scenarios.load(p), seed=0, progress=False).metrics["cells"]["kf"]["table1-equator-h0-tac"]
+    assert cell["efficiency_U"] < 1.9, cell["efficiency_U"]
