@@ -9,10 +9,11 @@ every step. The filters of all runs step together in a :class:`baselines.filter_
 arithmetic on arrays over runs, or ``engine="filterpy"``, one :class:`filterpy.kalman.KalmanFilter` per run, the
 reference).
 
-Without an initial guess the fine stage starts at the record's start from the coarse attitude carried back there
-(on a fixed base when that attitude is within the filter's linear range, else at the hand-over), with the velocity (and position) the aiding gives at the start (:func:`baselines.kalman_aiding.initial_motion`: rows
-interpolated or positions differenced, the lever arm's term removed), its initial covariance as good as that is, and
-reports from the hand-over on.
+Without an initial guess the fine stage starts at the record's start from the coarse attitude carried back there (on
+a fixed base when that attitude is within the filter's linear range, else at the hand-over), with the velocity (and
+position) the aiding gives at the start (:func:`baselines.kalman_aiding.initial_motion`: rows interpolated or
+positions differenced, the lever arm's term removed), its initial covariance as good as that is, and reports from
+the hand-over on.
 
 Stationary-base limits: the filter cannot separate the horizontal accelerometer biases from tilt nor
 the east gyro bias from azimuth, so it lands on :func:`fusionbench.metrics.theoretical_limits`.

@@ -172,13 +172,13 @@ def test_fixed_base_fine_stage_has_the_whole_record_at_the_hand_over():
 
 
 def test_fixed_base_biases_keep_the_tactical_level_on_its_limit():
-    # changed: the accelerometer bias states were body-frame ones on a fixed base too, where the horizontal accelerometer biases are
-    # unobservable against the tilts; the unobservable directions then turned with the estimated attitude (its
-    # corrections, the gyro noise's wander) and the filter took spurious information from that: with a tactical IMU
-    # (1 deg/h, 0.1 deg/sqrt(h), 300 ug) its north level ended 1.8 arcmin RMS beside the limit (mean 1.7), against
-    # the optimal estimator's 0.08 (fusionbench.bound.attainable_bound); navigation-frame states: 0.08 / 0.11. The
-    # gyro biases stay body-frame: a north gyro bias alone (noise-free, from the true attitude) then leaves the
-    # azimuth where it was (navigation-frame gyro states took it 71 arcmin off)
+    # changed: the accelerometer bias states were body-frame ones on a fixed base too, where the horizontal
+    # accelerometer biases are unobservable against the tilts; the unobservable directions then turned with the
+    # estimated attitude (its corrections, the gyro noise's wander) and the filter took spurious information from
+    # that: with a tactical IMU (1 deg/h, 0.1 deg/sqrt(h), 300 ug) its north level ended 1.8 arcmin RMS beside the
+    # limit (mean 1.7), against the optimal estimator's 0.08 (fusionbench.bound.attainable_bound); navigation-frame
+    # states: 0.08 / 0.11. The gyro biases stay body-frame: a north gyro bias alone (noise-free, from the true
+    # attitude) then leaves the azimuth where it was (navigation-frame gyro states took it 71 arcmin off)
     from fusionbench import bound
 
     lat = 0.0
