@@ -87,9 +87,12 @@ class KalmanAligner(AlignerBase):
     # moving (conformance matrix, 20 runs, seeds 0/1/2, efficiency about the optimal estimator's bias limit): the
     # 0.1 g base 0.66-1.37 (1.09-1.66 with one reference row in five and no mean offset either way); a car's drive
     # with turns 0.70-1.39 with velocity at 10 or 1 Hz, position only at 1 Hz, a 60-s outage, a 1.5-m lever arm,
-    # 50 ms of latency; not tactical gyros: 1.6-2.1 bounds off in azimuth on a fixed base (docs/open-claims.md)
-    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=89.0, max_bias_ratio=0.05,
-                        aiding=("velocity", "position"), min_aiding_hz=1.0, max_outage_s=60.0)
+    # 50 ms of latency; tactical gyros (1 deg/h, up to 0.149 of the horizontal earth rate in the matrix) on a fixed
+    # base 0.68-1.01 since F is formed at gravity's reaction there (1.54-2.11 before), not on a moving one: on the
+    # tactical drive its levels end at 0.94-0.99 of their tolerance (docs/open-claims.md)
+    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=89.0, max_bias_ratio=0.15,
+                        max_bias_ratio_moving=0.05, aiding=("velocity", "position"), min_aiding_hz=1.0,
+                        max_outage_s=60.0)
     max_latitude_deg = 89.0
     # a given init (yaw off; static, 34 N, navigation, 300 s): up to 45 deg recovered to the undisturbed 0.4-3.9
     # arcmin, 60 deg left 4-7, 90 deg 17-20, 180 deg 8-11 deg
@@ -176,8 +179,8 @@ class KalmanAligner(AlignerBase):
         does so only when the coarse azimuth is within the filter's linear range: the error the IMU model allows the
         coarse stage (:func:`fusionbench.init_check.coarse_error_deg` less its allowance for sway and rows) within
         :data:`RERUN_MAX_DEG`; beyond it the record's first minute, filtered from degrees off, cost more than it gave
-        (a tactical IMU under seed 000's sway at the equator: 2.38 bounds from the start, 1.54 from the hand-over;
-        the README's bench FOG: 93 against 80 arcmin from window to window)."""
+        (a tactical IMU under seed 000's sway at the equator, 20 runs: 0.77 attainable bounds from the start, 0.68
+        from the hand-over)."""
         t, dth, dv = imu.increments()
 
         def fine(rest, rows, C0, t_start, k, after=None):  # k: the increment at the start (its body rate)
@@ -227,7 +230,7 @@ class KalmanAligner(AlignerBase):
         sd = Strapdown(NavState.broadcast(R, C0, v0, lat, lon, h), dt, height_fixed=True)
         P0 = self._p0(site.lat, sigma_v0, sigma_p0 if position else None)
         kf = FeedbackKalman(sd, self._new_bank(R, P0), self._qc(), T, dt, self._q_scale, self._update,
-                            nav_accel_biases=fixed_base)
+                            fixed_base=fixed_base)
         out_t = np.empty(steps + (tail > 0))
         out_C = np.empty((R, steps + (tail > 0), 3, 3))
         out_s = np.empty((R, steps + (tail > 0), 3))
@@ -271,9 +274,11 @@ class AdaptiveKalmanAligner(KalmanAligner):
     # scenario's reference noise reached it; since then 0.73-0.97 at 75 N, 1.27 at 80 N (0.82 on the mild sway at
     # 80 S; conformance, 20 runs); moving (20 runs, seeds 0/1/2): the 0.1 g base
     # 0.75-1.59 (1.59 on the 0.1-m/s reference at 45 S with seed 2, 1.09 and 1.16 with seeds 0 and 1), the drives
-    # 0.76-1.39 (velocity at 10 or 1 Hz, position at 1 Hz, a 60-s outage, a lever arm, a latency)
-    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.05,
-                        aiding=("velocity", "position"), min_aiding_hz=1.0, max_outage_s=60.0)
+    # 0.76-1.39 (velocity at 10 or 1 Hz, position at 1 Hz, a 60-s outage, a lever arm, a latency); tactical gyros on
+    # a fixed base as kf (0.68-1.01), not on a moving one (the tactical drive's levels 1.01 of their tolerance)
+    supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.15,
+                        max_bias_ratio_moving=0.05, aiding=("velocity", "position"), min_aiding_hz=1.0,
+                        max_outage_s=60.0)
     description = "innovation-adaptive Kalman alignment (Sage-Husa R, covariance-matched Q inflation)"
     # a given init (kf's conditions): 45 deg of yaw recovered to 1.1-1.9 arcmin but 0.6 of level (0.13 from the
     # truth), 90 deg to 3-6 arcmin, 180 deg left 178 deg

@@ -12,6 +12,11 @@ measures positions), with the psi-angle model::
     dv'  =  [f^n x] phi + B nab - [(2 w_ie + w_en) x] dv + w_a      (east and north rows)
     dp'  =  dv
 
+with ``f^n`` the specific force: on a moving base the strapdown's (``C_bn f^b``), on a fixed base the one the
+reference implies, gravity's reaction ``[0, 0, g]``. The strapdown's horizontal part there is ``g`` times the
+estimate's tilt error: formed at it, F couples the azimuth into the velocity where the true errors do not, and the
+filter takes information on the azimuth that the data do not hold (``docs/open-claims.md``: what it cost).
+
 The gyro biases are body-frame states. The accelerometer biases are body-frame states (``B = C_bn``) on a moving
 base, where the turns make them partly observable, and navigation-frame states (``B = I``) on a fixed one. There
 the horizontal accelerometer biases are unobservable against the tilts, and body-frame states turn that unobservable
@@ -97,8 +102,9 @@ class FeedbackKalman:
     q_scale, update : callable
         The aligner's hooks: ``q_scale(bank)`` the factor (R,) on Q in the prediction, ``update(bank, z, H, r,
         chan, k)`` the measurement update k (the adaptive variant adapts R and Q there).
-    nav_accel_biases : bool
-        Accelerometer bias states in the navigation frame (a fixed base), else in the body frame (module docstring).
+    fixed_base : bool
+        A base at rest (the reference's velocity zero): the accelerometer bias states in the navigation frame, and F
+        at gravity's reaction instead of the strapdown's specific force (module docstring).
 
     Attributes
     ----------
@@ -112,9 +118,9 @@ class FeedbackKalman:
         Measurement updates so far.
     """
 
-    def __init__(self, sd, bank, qc, T, dt, q_scale, update, nav_accel_biases=False):
+    def __init__(self, sd, bank, qc, T, dt, q_scale, update, fixed_base=False):
         self.sd, self.bank, self.qc, self.T, self.dt = sd, bank, qc, T, dt
-        self.nav_accel_biases = bool(nav_accel_biases)
+        self.fixed_base = bool(fixed_base)
         self._q_scale, self._update = q_scale, update
         R = sd.runs
         self.z = np.zeros((R, 0))
@@ -147,11 +153,14 @@ class FeedbackKalman:
         inside = rowed and rows.need_history(*span)  # else the state at the step's end is enough
         start = {"C_bn": C_prev, "v_n": st.v_n.copy(), "pos": np.stack([st.lat, st.lon, st.h], -1)} if inside else {}
         hist = sd.run(g_in, a_in, record_every=1 if inside else m)
-        f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
+        if self.fixed_base:  # the specific force the reference implies, gravity's reaction (module docstring)
+            f_n = -earth.gravity_n(st.lat, st.h)
+        else:
+            f_n = np.einsum("rij,rj->ri", 0.5 * (C_prev + st.C_bn), a_in.sum(axis=1) / T)
         w_ie = earth.earth_rate_n(st.lat)
         w_en = earth.transport_rate_n(st.v_n, st.lat, st.h)
         F = error_model(st.C_bn, f_n, w_ie + w_en, 2 * w_ie + w_en, position=nx > NX,
-                         nav_accel_biases=self.nav_accel_biases)
+                         nav_accel_biases=self.fixed_base)
         Qc = np.zeros((R, nx, nx))
         Qc[:, 0:3, 0:3] = st.C_bn @ (qc[0:3, None] * np.swapaxes(st.C_bn, -1, -2))
         Qc[:, 3:5, 3:5] = (st.C_bn @ (np.r_[qc[3:5], 0.0][:, None] * np.swapaxes(st.C_bn, -1, -2)))[:, :2, :2]
@@ -180,7 +189,7 @@ class FeedbackKalman:
         st = self.sd.state
         st.C_bn[:] = rotvec_to_dcm(x[:, 0:3]) @ st.C_bn
         st.v_n[:, :2] -= x[:, 3:5]
-        if self.nav_accel_biases:  # b_body = C_bn^T b_nav
+        if self.fixed_base:  # navigation-frame accelerometer biases: b_body = C_bn^T b_nav
             x[:, 8:11] = np.einsum("rji,rj->ri", st.C_bn, x[:, 8:11])
         self.eps_hat += x[:, 5:8]
         self.nab_hat += x[:, 8:11]

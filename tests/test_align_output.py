@@ -50,8 +50,8 @@ def sway_imu(tmp_path_factory):
                        (0.0, 0.0, 0.0), lat=LAT, lon=LON, h=H)
 
 
-def test_kf_told_a_tactical_imu_answers_with_the_reason_and_one_warning_line(capsys, static_csv):
-    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "kf", "--imu", "tactical", "--json")
+def test_pid_told_a_tactical_imu_answers_with_the_reason_and_one_warning_line(capsys, static_csv):
+    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "pid", "--imu", "tactical", "--json")
     assert status == 0, err
     res = json.loads(out)
     # the tactical gyro: 1 deg/h fixed, 0.5 deg/h drifting, against the horizontal earth rate at 47 deg
@@ -61,14 +61,17 @@ def test_kf_told_a_tactical_imu_answers_with_the_reason_and_one_warning_line(cap
     reason = res["outside_claim"]
     assert "gyro bias of IMU 'tactical'" in reason and f"{ratio:.3g} of the horizontal earth rate" in reason
     assert "beyond the 0.05 it claims" in reason and "latitude" not in reason and "base" not in reason
-    assert err == f"fusionbench: warning: kf: outside its claim: {reason}\n"
+    assert err == f"fusionbench: warning: pid: outside its claim: {reason}\n"
     assert res["base"] == "static" and res["limit_note"] is None
     # the existing keys are kept as they were
     assert {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg"} <= set(res)
     # the plain output says it too
+    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "pid", "--imu", "tactical")
+    assert status == 0 and err == f"fusionbench: warning: pid: outside its claim: {reason}\n"
+    assert f"outside the method's claim: {reason}" in out
+    # kf claims it on a fixed base (up to 0.15 of the earth rate): no warning, its predicted sigma
     status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "kf", "--imu", "tactical")
-    assert status == 0 and err == f"fusionbench: warning: kf: outside its claim: {reason}\n"
-    assert f"outside the method's claim: {reason}" in out and "predicted sigma E " in out
+    assert status == 0 and err == "" and "outside" not in out and "predicted sigma E " in out
 
 
 def test_kf_told_a_navigation_imu_gives_its_sigma_and_the_fixed_bias_limit_without_a_warning(capsys, static_csv):
@@ -190,7 +193,10 @@ def test_outside_claim_names_each_rule():
     assert outside_claim(Claimed(), imu, site, spec=tac) is None  # the default claim: up to 0.5 of the earth rate
     kf = load_method("kf")
     assert outside_claim(kf, imu, site, spec=nav) is None
-    assert "gyro bias of IMU 'tactical' (1.12 deg/h)" in outside_claim(kf, imu, site, spec=tac)
+    assert outside_claim(kf, imu, site, spec=tac) is None  # claims 0.15 of the earth rate at rest ...
+    assert outside_claim(kf, imu, site, aiding=_moving_rows(2.0), spec=tac) == (
+        "the gyro bias of IMU 'tactical' (1.12 deg/h) is 0.109 of the horizontal earth rate at the site, beyond the "
+        "0.05 it claims on a moving base")  # ... and 0.05 in motion
     # navigation grade against a claim of 0.001: its 0.0054 deg/h is 0.00053 of 10.26 deg/h
     ratio = np.sqrt(0.005**2 + 0.002**2) / (OMEGA * np.cos(LAT) * 3600 / D)
     why = outside_claim(Claimed(max_bias_ratio=0.0005), imu, site, spec=nav)
@@ -218,7 +224,7 @@ def test_outside_claim_names_each_rule():
     ratio = np.hypot(1.0, 0.5) / (OMEGA * np.cos(85 * D) * 3600 / D)
     assert outside_claim(kf, north, Site(85 * D), spec=tac) == (
         f"the gyro bias of IMU 'tactical' (1.12 deg/h) is {ratio:.3g} of the horizontal earth rate at the site, beyond "
-        f"the 0.05 it claims")
+        f"the 0.15 it claims")
     pid = load_method("pid")
     assert outside_claim(pid, north, Site(85 * D), spec=tac).startswith("latitude 85 deg, beyond the 70 deg it claims; "
                                                                         "the gyro bias of IMU 'tactical'")

@@ -77,9 +77,9 @@ def mini(tmp_path_factory):
 def test_claims_decide_the_cells(mini):
     _, out = mini
     cells = out.metrics["cells"]
-    # coarse claims only a static base; kf only navigation-grade gyros (a tactical bias is 0.09 of the earth rate)
+    # coarse claims only a static base; kf tactical gyros on a fixed base (a tactical bias is 0.09 of the earth rate)
     assert cells["coarse"]["sway-nav"]["status"] == "not claimed"
-    assert cells["kf"]["static-tac"]["status"] == "not claimed"
+    assert cells["kf"]["static-tac"]["status"] == "pass"  # claimed, so run and scored (1.07 here)
     assert cells["coarse"]["static-tac"]["status"] in ("pass", "fail")
     assert out.metrics["conditions"]["static-tac"]["gyro_bias_ratio"] == pytest.approx(
         azimuth_bias_ratio(PRESETS["tactical"], np.radians(34.0)))
