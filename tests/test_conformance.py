@@ -231,3 +231,62 @@ def test_a_wrong_init_is_a_condition_refused_within_the_declared_capture_and_rec
     turn = scn.initial_guess(C) @ C.T
     assert np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))) == pytest.approx(180.0, abs=1e-6)
     assert turn[2, 2] == pytest.approx(1.0, abs=1e-12)
+
+
+SWAY_TAC = """
+name = "sway-tac"
+experiment = "conformance"
+duration_s = 300.0
+rate_hz = 50.0
+runs = 8
+methods = ["coarse-i0"]
+[conformance]
+level_tolerance_arcmin = 0.5
+efficiency = { default = 3.0 }
+[[condition]]
+name = "table1-45s-tac"
+base = "sway-table1"
+lat_deg = -45.0
+heading_deg = -179.0
+imu = "tactical"
+"""
+
+
+def test_on_a_sway_the_levels_pass_on_the_stationary_limit_or_on_the_bias_limit(tmp_path):
+    # seed 000's Table-1 sway turns a tactical IMU's accelerometers by 5-9 deg: an estimator of the full model
+    # separates their horizontal biases from the tilts (bias_limit: levels 1.0 -> 0.01 arcmin), one without them stays
+    # on the stationary limit; a level off both fails
+    from types import SimpleNamespace
+
+    from fusionbench import bound
+    from fusionbench.conformance import _cell, sway_level_limit
+    from fusionbench.conformance_file import condition_bound, condition_scenario
+
+    p = tmp_path / "sway-tac.toml"
+    p.write_text(SWAY_TAC)
+    matrix = scenarios.load(p)
+    cond = matrix.conditions[0]
+    scn = condition_scenario(matrix, cond)
+    traj = scn.trajectory(300.0)
+    level, sigma = sway_level_limit(scn, cond, 300.0)
+    # the independent computation: the bias limit's own levels, and the stationary limit they leave
+    bl = bound.bias_limit(scn.imu_spec, 300.0, trajectory=traj, **scn.reference_model())
+    assert np.allclose(level, bl.limit[-1, :2]) and np.allclose(sigma, bl.sigma[-1, :2])
+    C_end = traj.truth([300.0]).C_bn[0]
+    static = metrics.theoretical_limits(scn.imu_spec.gyro.bias, scn.imu_spec.accel.bias, C_end, scn.site.lat,
+                                        scn.site.h)
+    assert np.all(np.abs(static[:2]) > 0.9 * units.ARCMIN) and np.all(np.abs(level) < 0.1 * units.ARCMIN)
+    b = condition_bound(scn, cond, 300.0)
+    noise = np.random.default_rng(1).normal(size=(8, 3)) * np.r_[0.1 * units.ARCMIN, 0.1 * units.ARCMIN, b[2]]
+
+    def cell(levels):
+        phi = np.column_stack([np.broadcast_to(levels, (8, 2)), np.full(8, static[2])]) + noise
+        oc = SimpleNamespace(per_run={"phi_end": phi, "settle": np.zeros(8), "settled": np.ones(8)}, wall_s=0.0)
+        out = SimpleNamespace(refused={}, outcomes={"m": oc}, limits=static,
+                              scenario=SimpleNamespace(method=lambda name: object()))
+        return _cell(matrix, cond, "m", out, b, (level, sigma))
+
+    on_static, on_bias, beyond = cell(static[:2]), cell(level), cell(2 * static[:2] - level)  # 1 arcmin past
+    assert on_static["status"] == "pass" and on_static["level_limit"] == "stationary"
+    assert on_bias["status"] == "pass" and on_bias["level_limit"] == "bias"
+    assert beyond["status"] == "fail" and "from the bias limit" in beyond["message"]
