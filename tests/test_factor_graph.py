@@ -8,7 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner, keyframe_counts
+from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner
+from baselines.graph_support import keyframe_counts
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Aligner, Site
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref

@@ -9,7 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from baselines.factor_graph import AdaptiveFactorGraphAligner, FactorGraphAligner, RobustFactorGraphAligner
+from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner
+from baselines.graph_adaptive import AdaptiveFactorGraphAligner
 from baselines.graph_aiding import build_problem, path_offsets, recording_rows, tile_data
 from baselines.graph_rows import at_rows, integral_at_rows, mean_at_rows, tile_sums, tiles
 from baselines.graph_support import keyframe_counts

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, V, X
 
-from baselines.factor_graph import (AdaptiveFactorGraphAligner, FactorGraphAligner,
-                                    noise_model)
+from baselines.factor_graph import FactorGraphAligner, noise_model
+from baselines.graph_adaptive import AdaptiveFactorGraphAligner
 from baselines.graph_rows import axis_means, tile_error, tile_factors, tile_sums, tiles
 from baselines.graph_support import Posterior
 from baselines.kalman import KalmanAligner

@@ -1,0 +1,86 @@
+"""Levenberg-Marquardt on the factor graph of one recording (:mod:`baselines.factor_graph`): the start values, the
+passes that relinearise the tile factors and recompensate the preintegration where the attitude moved, and the
+robust variant's reweighting.
+
+The solver's tolerances and why QR: ``docs/methods/gtsam.md``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import gtsam
+from gtsam.symbol_shorthand import B, V, X
+
+from fusionbench.attitude import dcm_to_rotvec
+
+from .graph_aiding import tile_data
+from .graph_build import GraphBuilder
+
+
+class GraphSolver(GraphBuilder):
+    """Solves the graph of one recording (:class:`GraphBuilder`) for
+    :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``)."""
+
+    def _optimize(self, graph, values):
+        lm = gtsam.LevenbergMarquardtParams()
+        lm.setLinearSolverType("MULTIFRONTAL_QR")
+        lm.setRelativeErrorTol(1e-10)
+        lm.setAbsoluteErrorTol(1e-10)
+        lm.setMaxIterations(self.max_iterations)
+        opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm)
+        return opt.optimize(), opt.iterations()
+
+    def _solve(self, problem, C_kf, values=None, imu_scale=None, pims=None):
+        """Optimise one recording from keyframe attitudes ``C_kf`` (K, 3, 3) (or from ``values``).
+
+        Returns ``(graph, values, C_kf, iterations, passes, converged, imu_idx, vel_idx, pims, data, pos_idx)``.
+        The tile factors are linearised at the current solution (their lever-arm terms and the turn of ENU taken
+        with its attitude) and, on a moving base, the preintegration compensated for the transport rate with its
+        attitude; the graph is rebuilt there until the attitude moves by less than ``recompensate_rad`` (and, in
+        the robust variant, the Huber weights settle). ``pims``: intervals already preintegrated with an attitude
+        within ``recompensate_rad`` of ``C_kf``.
+        """
+        counts, seg, walk = problem["counts"], problem["seg"], problem["walk"]
+        K = counts.size
+        data = tile_data(problem, C_kf)
+        if values is None:
+            values = gtsam.Values()
+            v0 = problem["v_kf"].copy()
+            if data["v"] is not None:  # the keyframes with rows: the velocity their rows and the IMU say
+                d = data["v"]
+                v_rows = d["z"] - np.einsum("kaj,kaj->ka", C_kf, d["U"])
+                v0 = np.where(np.isfinite(d["var"]), v_rows, v0)
+            for k in range(K):
+                values.insert(X(k), gtsam.Pose3(gtsam.Rot3(C_kf[k]), problem["p_kf"][k]))
+                values.insert(V(k), v0[k])
+            for j in range(int(seg.max()) + 1):
+                values.insert(B(j), gtsam.imuBias.ConstantBias())
+        iterations, converged, moved = 0, True, 0.0
+        huber = self._huber_weights(problem, data, values)
+        c_max = np.abs(problem["c_n"]).max()
+        passes = max(self.max_passes, 10) if self.robust else self.max_passes
+        for n_pass in range(1, passes + 1):
+            if pims is None:
+                pims = self._preintegrate(problem, C_kf)
+            if n_pass > 1 and moved > self.recompensate_rad:  # the lever arm and the turn of ENU at the new attitude
+                data = tile_data(problem, C_kf)
+            graph, imu_idx, idx = self._graph(pims, data, problem, seg, walk, values, imu_scale, huber)
+            values, n_it = self._optimize(graph, values)
+            iterations += n_it
+            converged = converged and n_it < self.max_iterations  # a pass stopped at the limit may have stalled
+            C_new = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
+            moved = np.abs(dcm_to_rotvec(C_new @ np.swapaxes(C_kf, -1, -2))).max()
+            C_kf = C_new
+            new_huber = self._huber_weights(problem, data, values)
+            settled = max(np.abs(new_huber[g] - huber[g]).max() for g in huber) <= 1e-3
+            huber = new_huber
+            if moved <= self.recompensate_rad and settled:
+                break
+            if moved > self.recompensate_rad and moved * c_max > 1e-9:  # the compensation matters
+                pims = None
+        return graph, values, C_kf, iterations, n_pass, converged, imu_idx, idx["v"], pims, data, idx["p"]
+
+    def _refine(self, problem, sol):
+        """Hook for the adaptive variant: the final solution and a dict of per-recording extras."""
+        return sol, {}
