@@ -119,8 +119,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
     # the Table-1 sway at 60, 75, 80 N 1.07, 0.77, 1.05 (1.60 at 60 N before tangent_rates); tactical gyros (up to
     # 0.149 of the horizontal earth rate in the matrix) on a fixed base: static 0.88-0.93 (4.88 at 60 N before the
     # tiles held the IMU's own noise), swaying 0.80-1.44 with the levels on the bias limit (the sway separates the
-    # accelerometer biases); not on a moving base (the tactical drive's levels at 0.95-1.0 of their tolerance), and
-    # gtsam-adaptive not at all (1.59 at 60 N, static; docs/open-claims.md)
+    # accelerometer biases); not on a moving base (the tactical drive's levels at 0.95-1.0 of their tolerance;
+    # docs/open-claims.md)
     # aiding: a car's 300-s drive with turns at 34 N and 60 N, navigation grade at 50 Hz, 6 runs each, rows of
     # 0.05 m/s or 0.5 m: velocity at 1, 0.5, 0.2, 0.1 Hz, azimuth rms 2.1, 2.6, 6.3, 10.2 arcmin (marginal sigma 2.6,
     # 3.5, 5.6, 8.0; 0.05 Hz 5.9 against 12); position only at 1, 0.2, 0.1 Hz 2.1, 2.9, 3.3 (2.5, 4.4, 5.9); outages

@@ -115,8 +115,12 @@ class GraphBuilder:
                 continue
             w = 1.0 if huber is None else huber[g][:, None]
             var = unit**2 * data[g]["var"] / w
-            if g == "v":  # what the IMU's own noise leaves in the prediction (graph_rows.tile_imu_variance)
-                var = var + tile_imu_variance(pims, lin[0], imu_scale)
+            if g == "v":  # what the IMU's own noise leaves in the prediction (graph_rows.tile_imu_variance), at
+                # least the nominal one: the ImuFactors' residuals, which the tiles share, put the adaptive IMU factor
+                # below 1 with an exact reference, and a share scaled down with it left gtsam-adaptive 1.59 bounds off
+                # at 60 N (tactical IMU; 0.90 with this floor)
+                scale = None if imu_scale is None else np.maximum(imu_scale, 1.0)
+                var = var + tile_imu_variance(pims, lin[0], scale)
             for k, f in tile_factors(data[g], np.sqrt(var), keys, lin):
                 idx[g][k] = graph.size()
                 graph.add(f)
