@@ -189,19 +189,19 @@ def test_a_tile_holds_the_imus_own_velocity_noise_over_an_interval():
 def test_an_exact_reference_leaves_a_tactical_heading_within_its_bound():
     # changed: each tile of 50 rows at the 1 mm/s floor counted 0.14 mm/s, against the 0.5 mm/s the IMU's own noise
     # (50 ug/sqrt(Hz)) leaves in its prediction; at 60 N, where the heading is nearly free against the east gyro bias,
-    # the graph then drifted 10 to 34 deg from the limit (4.9 attainable bounds, 20 runs); with the IMU's share in
-    # every tile 0.9
+    # the graph then drifted 10 to 34 deg from the limit (4.9 attainable bounds, 20 runs of 300 s at 50 Hz); with the
+    # IMU's share in every tile 0.9. Here (25 Hz, 200 s) 3.02 without it, 0.82 with it
     from fusionbench import bound
 
-    lat, runs = 60 * D, 8
-    tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(1 * D, -2 * D, 179 * D)), duration=300.0)
+    lat, runs, dt, T = 60 * D, 6, 0.04, 200.0
+    tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(1 * D, -2 * D, 179 * D)), duration=T)
     spec = PRESETS["tactical"]
-    data = simulate(tr, spec, 0.02, runs=runs, seed=0)
+    data = simulate(tr, spec, dt, runs=runs, seed=0)
     res = FactorGraphAligner(imu="tactical", vref_sigma=0.0).align(data, Site(lat, 0.0, 0.0))
     phi, lim = final_error_and_limits(tr, res, spec, Site(lat, 0.0, 0.0))
-    _, b = bound.attainable_bound(spec, 300.0, trajectory=tr, vref_sigma=0.0, vref_dt=0.02)
+    _, b = bound.attainable_bound(spec, T, trajectory=tr, vref_sigma=0.0, vref_dt=dt)
     rms_u = np.sqrt(np.mean((phi[:, 2] - lim[2]) ** 2))
-    assert rms_u < 1.6 * b[-1, 2], rms_u / b[-1, 2]  # 8 runs scatter the ratio by about +-0.25 of itself
+    assert rms_u < 1.6 * b[-1, 2], rms_u / b[-1, 2]  # 6 runs scatter the ratio by about +-0.3 of itself
 
 
 def test_a_moving_base_with_a_velocity_reference_is_aligned_through_the_transport_rate():
