@@ -24,18 +24,34 @@ class GraphBuilder:
     figures (``gyro_noise``, ``accel_noise``, ``integration_sigma``, bias priors and walk, ``bias_interval_s``,
     ``vref_sigma``, ``aiding_position_sigma``, ``position_sigma``, ``init_sigma``, ``robust``, ``huber_k``)."""
 
-    def _huber_weights(self, problem, data, values):
+    def _tile_variance(self, g, data, pims, poses, imu_scale=None):
+        """Variance (K, 3) (m/s)^2 or m^2, ENU, of the tile factors of group ``g`` ("v" velocity, "p" position)
+        before any Huber weight: the rows' own (their unit sigma squared times ``data[g]["var"]``) and, for the
+        velocity tiles, what the IMU's own noise leaves in the prediction (:func:`baselines.graph_rows.tile_imu_variance`
+        at the keyframe ``poses``), at least the nominal share: the ImuFactors' residuals, which the tiles share, put
+        the adaptive IMU factor ``imu_scale`` below 1 with an exact reference, and a share scaled down with it left
+        gtsam-adaptive 1.59 bounds off at 60 N (tactical IMU; 0.90 with this floor)."""
+        unit = self.vref_sigma if g == "v" else self.aiding_position_sigma
+        var = unit**2 * data[g]["var"]
+        if g == "v":
+            scale = None if imu_scale is None else np.maximum(imu_scale, 1.0)
+            var = var + tile_imu_variance(pims, poses, scale)
+        return var
+
+    def _huber_weights(self, problem, data, values, pims, imu_scale=None):
         """Huber weights of the tile factors at ``values``, ``{"v": (K,), "p": (K,)}`` (robust variant; all 1
         otherwise): 1 within ``huber_k`` sigmas of the whitened error's norm, ``huber_k / |e|`` beyond (gtsam's
-        Huber on a block)."""
+        Huber on a block). The error is whitened by the factor's whole variance (:meth:`_tile_variance`), the IMU's
+        share included, so that a tile the factor itself expects to be off is not down-weighted for it."""
         K = problem["counts"].size
         out = {g: np.ones(K) for g in ("v", "p")}
         if not self.robust:
             return out
         R, t, v, b = keyframe_states(values, K, problem["seg"])
-        for g, unit in (("v", self.vref_sigma), ("p", self.aiding_position_sigma)):
+        poses = [values.atPose3(X(k)) for k in range(K)]
+        for g in ("v", "p"):
             if data[g] is not None:
-                e = tile_error(data[g], R, t, v, b) / (unit * np.sqrt(data[g]["var"]))
+                e = tile_error(data[g], R, t, v, b) / np.sqrt(self._tile_variance(g, data, pims, poses, imu_scale))
                 r = np.linalg.norm(np.where(np.isfinite(data[g]["var"]), e, 0.0), axis=1)
                 out[g] = np.where(r <= self.huber_k, 1.0, self.huber_k / np.maximum(r, 1e-300))
         return out
@@ -110,17 +126,11 @@ class GraphBuilder:
         keys = [(X(k), V(k), B(seg[min(k, K - 2)])) for k in range(K)]
         lin = ([at.atPose3(X(k)) for k in range(K)], np.stack([at.atVector(V(k)) for k in range(K)]),
                [at.atConstantBias(key[2]) for key in keys])
-        for g, unit in (("v", self.vref_sigma), ("p", self.aiding_position_sigma)):
+        for g in ("v", "p"):
             if data[g] is None:
                 continue
             w = 1.0 if huber is None else huber[g][:, None]
-            var = unit**2 * data[g]["var"] / w
-            if g == "v":  # what the IMU's own noise leaves in the prediction (graph_rows.tile_imu_variance), at
-                # least the nominal one: the ImuFactors' residuals, which the tiles share, put the adaptive IMU factor
-                # below 1 with an exact reference, and a share scaled down with it left gtsam-adaptive 1.59 bounds off
-                # at 60 N (tactical IMU; 0.90 with this floor)
-                scale = None if imu_scale is None else np.maximum(imu_scale, 1.0)
-                var = var + tile_imu_variance(pims, lin[0], scale)
+            var = self._tile_variance(g, data, pims, lin[0], imu_scale) / w
             for k, f in tile_factors(data[g], np.sqrt(var), keys, lin):
                 idx[g][k] = graph.size()
                 graph.add(f)

@@ -57,7 +57,7 @@ class GraphSolver(GraphBuilder):
             for j in range(int(seg.max()) + 1):
                 values.insert(B(j), gtsam.imuBias.ConstantBias())
         iterations, converged, moved = 0, True, 0.0
-        huber = self._huber_weights(problem, data, values)
+        huber = None  # the Huber weights need the intervals' covariance (the tiles' IMU share): first pass below
         c_max = np.abs(problem["c_n"]).max()
         passes = max(self.max_passes, 10) if self.robust else self.max_passes
         for n_pass in range(1, passes + 1):
@@ -65,6 +65,8 @@ class GraphSolver(GraphBuilder):
                 pims = self._preintegrate(problem, C_kf)
             if n_pass > 1 and moved > self.recompensate_rad:  # the lever arm and the turn of ENU at the new attitude
                 data = tile_data(problem, C_kf)
+            if huber is None:
+                huber = self._huber_weights(problem, data, values, pims, imu_scale)
             graph, imu_idx, idx = self._graph(pims, data, problem, seg, walk, values, imu_scale, huber)
             values, n_it = self._optimize(graph, values)
             iterations += n_it
@@ -72,7 +74,7 @@ class GraphSolver(GraphBuilder):
             C_new = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
             moved = np.abs(dcm_to_rotvec(C_new @ np.swapaxes(C_kf, -1, -2))).max()
             C_kf = C_new
-            new_huber = self._huber_weights(problem, data, values)
+            new_huber = self._huber_weights(problem, data, values, pims, imu_scale)
             settled = max(np.abs(new_huber[g] - huber[g]).max() for g in huber) <= 1e-3
             huber = new_huber
             if moved <= self.recompensate_rad and settled:
