@@ -7,6 +7,25 @@ import pytest
 DATA = Path(__file__).parent / "data"
 
 
+def _plain(value):
+    """``value`` with NumPy scalars and arrays turned into Python numbers and lists, recursively through tuples and
+    lists: what pytest-xdist's workers can send back to the controller."""
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    if isinstance(value, (tuple, list)):
+        return type(value)(_plain(v) for v in value)
+    return value
+
+
+@pytest.fixture
+def record_property(request):
+    """pytest's ``record_property``, with the value made plain (:func:`_plain`) so that it survives the trip from an
+    xdist worker."""
+    def record(name, value):
+        request.node.user_properties.append((name, _plain(value)))
+    return record
+
+
 @pytest.fixture
 def data_dir():
     return DATA
