@@ -35,7 +35,7 @@ least-squares fits take no sample (a prediction holds no new information). A ste
 gains of the ESO's law times ``n``, the nominal number of steps between rows (:attr:`StepRows.steps_per_row`: 1 at
 10 Hz with the default 0.1-s step, 10 at 1 Hz): the same continuous bandwidth whatever the rate (beta1, beta2 are
 per second). The expanding-memory gains count rows, not steps, and with ``n`` steps between rows they are the
-least-squares line through the rows (:func:`adrc.moving_base.expanding_memory_gains`). After an outage the
+least-squares line through the rows (:func:`adrc.eso_td_estimator.expanding_memory_gains`). After an outage the
 correction is the nominal one: the ESO pulls the prediction's error in over its own time constants. The
 estimator's clock (the fit's start, the first feedback) starts at the first step with rows.
 

@@ -5,10 +5,10 @@
 :meth:`adrc.eso_td_rows.StepRows.measure`) and the specific force (ENU, m/s^2) of the step, the ESO of eq. 6 on
 both level channels (a correction with rows, the prediction alone without), eqs. 7, 9 and 12 with the fst TD
 (``td="fst"``) or the least-squares TD and its copies of the ESO's filter (``td="ls"``), and the velocity reset at
-rows: what :meth:`adrc.moving_base.ESOTDEstimator.step` and the loop of :meth:`adrc.moving_base.ESOTDAligner._align`
+rows: what :meth:`adrc.eso_td_estimator.ESOTDEstimator.step` and the loop of :meth:`adrc.moving_base.ESOTDAligner._align`
 do, on the estimator's own arrays, operation for operation and in the same order. It stops at each attitude
 feedback (every ``feedback_every_s``, 10 s by default), which the estimator's NumPy code makes
-(:meth:`~adrc.moving_base.ESOTDEstimator.feedback`, :func:`run_compiled`); the reported attitude, the strapdown's
+(:meth:`~adrc.eso_td_estimator.ESOTDEstimator.feedback`, :func:`run_compiled`); the reported attitude, the strapdown's
 turned by the estimate, is made from the histories in one NumPy call. NumPy's einsum sums products in its own
 order (:func:`_rotate_sum` follows it for the specific force on this machine's 4-lane vectors), and the lever-arm
 terms' sums of three products differ from it in the last bit, so the engines agree to rounding
@@ -24,6 +24,7 @@ from fusionbench import earth
 from fusionbench.attitude import apply_misalignment
 from fusionbench.strapdown import integrate_compiled
 
+from .eso_td_estimator import expanding_memory_gains
 from .eso_td_rows_compiled import measure, row_arrays
 from .primitives_compiled import eso2_step, fst_step
 
@@ -38,7 +39,7 @@ def _rotate_sum(C, v, i):
 
 @numba.njit(cache=True)
 def _ls_add(S, origin, r, X, Y, forget, first):
-    """:meth:`adrc.moving_base.LeastSquaresDifferentiator.add` for run ``r``: S (5, R), origin (2, R) set at the
+    """:meth:`adrc.ls_differentiator.LeastSquaresDifferentiator.add` for run ``r``: S (5, R), origin (2, R) set at the
     ``first`` sample."""
     if first:
         origin[0, r], origin[1, r] = X, Y
@@ -52,7 +53,7 @@ def _ls_add(S, origin, r, X, Y, forget, first):
 
 @numba.njit(cache=True)
 def _ls_slope(S, r):
-    """The slope b of :meth:`adrc.moving_base.LeastSquaresDifferentiator.fit` for run ``r``."""
+    """The slope b of :meth:`adrc.ls_differentiator.LeastSquaresDifferentiator.fit` for run ``r``."""
     det = S[0, r] * S[2, r] - S[1, r] * S[1, r]
     return (S[0, r] * S[4, r] - S[1, r] * S[3, r]) / det if det > 0 else 0.0
 
@@ -89,7 +90,7 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
         ``ints`` (6, R): X_int, Xb_int, M_int, XX_int, s_jumps, X; the previous step's den_a, den_b, m (3, R);
         ``F_int`` (R, 3).
     clock, times : ndarray, shapes (3,), (3,)
-        :attr:`adrc.moving_base.ESOTDEstimator.clock` and ``times``.
+        :attr:`adrc.eso_td_estimator.ESOTDEstimator.clock` and ``times``.
     rows_t : tuple
         The steps' row time offsets (samples) and spreads (s^2) (:class:`adrc.eso_td_rows.StepRows`).
     reset_sum, psi_fb, v_prev, P, marks : ndarray
@@ -97,7 +98,7 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
         the step's start (R, 2, m/s), the position intervals' integrals (R, 5) and marks (R, n_marks, 8).
     now : ndarray, shape (R, 12)
         Written at each step: f_n (3, m/s^2), f_n' (3), W, sin L, cos L, L', the Coriolis coefficient, fE / fU (the
-        quantities :meth:`adrc.moving_base.ESOTDEstimator.feedback` reads).
+        quantities :meth:`adrc.eso_td_estimator.ESOTDEstimator.feedback` reads).
     hist_Csd, hist_psi, hist_fb, hist_y : ndarray
         Written at each step j: the strapdown's attitude (R, steps, 3, 3), the estimate psi before any feedback
         (R, steps, 3, rad), the corrections so far (R, >= steps, 3), the unreset velocity error (R, >= steps, 2; NaN
@@ -217,7 +218,7 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
                 ds = fx2[r, 0] / fU - fE * fx2[r, 2] / (fU * fU)  # s' = (fE / fU)'
                 den = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate + ds
                 psiU = (W * sl * p - qx2[r] - s * (W * cl * q + lat_rate * p)) / den
-            else:  # eq. 12 integrated (module docstring of adrc.moving_base)
+            else:  # eq. 12 integrated (docs/methods/eso-td.md)
                 den0 = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate
                 m_known = W * sl * p - s * (W * cl * q + lat_rate * p)
                 den_a, den_b = W * cl, den0 - W * cl
@@ -271,7 +272,7 @@ def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
 
     Parameters
     ----------
-    est : adrc.moving_base.ESOTDEstimator
+    est : adrc.eso_td_estimator.ESOTDEstimator
         The estimator, fresh (its states, and the rows' marks, are advanced in place).
     sd : fusionbench.strapdown.Strapdown
         The strapdown (advanced in place).
@@ -280,7 +281,6 @@ def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
     hist_C, hist_psi, hist_fb, hist_y : ndarray
         The histories the NumPy loop fills (R, records, ...); the first ``steps`` entries are written.
     """
-    from .moving_base import expanding_memory_gains  # (that module imports this one)
 
     a, R, h, steps, n = est.a, est.R, est.h, dth_b.shape[0], est.n
     is_ls, eso_ls = a.td == "ls", a.eso_start == "ls"

@@ -14,8 +14,10 @@ import re
 import numpy as np
 import pytest
 
-from adrc.moving_base import (PAPER_PARAMETERS, ESOTDAligner, FSTTrackingDifferentiator, LeastSquaresDifferentiator,
-                               SecondOrderESO, expanding_memory_gains, fst)
+from adrc.eso_td_estimator import expanding_memory_gains
+from adrc.ls_differentiator import LeastSquaresDifferentiator
+from adrc.moving_base import PAPER_PARAMETERS, ESOTDAligner
+from adrc.primitives import FSTTrackingDifferentiator, SecondOrderESO, fst
 from fusionbench import attitude, earth, metrics, trajectory as tj, units
 from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
