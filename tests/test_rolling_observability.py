@@ -6,6 +6,7 @@ from scipy.linalg import expm
 
 from baselines.rolling import model
 from baselines.rolling import observability as ro
+from baselines.rolling import figures as rolling_figures
 from baselines.rolling.jacobians import error_jacobians
 from baselines.rolling.priors import prior_sigma
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, commanded_path, commands
@@ -171,7 +172,7 @@ def test_weakest_directions_of_a_full_rank_scheme(m_paper):
 def test_figure_is_written(tmp_path):
     scheme = Scheme(((SOUTH, RATE, 120.0), (EAST, RATE, 60.0)))
     t, S = ro.sensitivity_curves(scheme, LAT)
-    path = ro.sensitivity_figure(t, S, path=tmp_path / "sens.png")
+    path = rolling_figures.sensitivity_figure(t, S, path=tmp_path / "sens.png")
     data = (tmp_path / "sens.png").read_bytes()
     assert path.endswith("sens.png") and data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
 

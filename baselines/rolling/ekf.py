@@ -82,7 +82,8 @@ from fusionbench import earth
 
 from . import kernels as K
 from . import model
-from .observability import information_rank, informed_directions, sensitivity_curves, sensitivity_figure
+from .figures import sensitivity_figure
+from .observability import information_rank, informed_directions, sensitivity_curves
 from .priors import ANGLE_SIGMA_DEG, prior_sigma
 from .protocol import CalibrationResult
 from .scheme import scheme_events
