@@ -25,13 +25,10 @@ GYRO_NOISE = 0.005 * units.DEG_PER_SQRT_H       # rad/sqrt(s)
 ACCEL_NOISE = 6.0 * units.UG_PER_SQRT_HZ        # m/s/sqrt(s)
 GYRO_BIAS_SIGMA = 0.1 * units.DEG_PER_H         # rad/s, 10 x seed000's 0.01 deg/h
 ACCEL_BIAS_SIGMA = 100.0 * units.UG             # m/s^2, above seed000's 30 ug
-#: Floors of the figures taken from an IMUSpec: white noise (a zero datasheet figure would make the
-#: preintegrated covariance singular) and bias-prior sigmas (those of the Kalman aligner, so that a
-#: zero figure does not freeze a bias).
+#: Floors of the white-noise densities taken from an IMUSpec: a zero datasheet figure would make the preintegrated
+#: covariance singular. (The bias priors' floors are the IMU model's: :meth:`fusionbench.imu.IMUSpec.bias_prior_sigma`.)
 GYRO_NOISE_FLOOR = 1e-5 * units.DEG_PER_SQRT_H
 ACCEL_NOISE_FLOOR = 0.1 * units.UG_PER_SQRT_HZ
-GYRO_BIAS_FLOOR = 0.01 * units.DEG_PER_H
-ACCEL_BIAS_FLOOR = 10.0 * units.UG
 
 
 def noise_model(spec):
@@ -49,7 +46,8 @@ def noise_model(spec):
         ``gyro_noise`` (3,) rad/sqrt(s), ``accel_noise`` (3,) m/s/sqrt(s) (white-noise densities,
         floored); ``gyro_bias_sigma`` (3,) rad/s and ``accel_bias_sigma`` (3,) m/s^2: the zero-mean
         bias priors, ``sqrt(bias^2 + bias_sigma^2 + instability^2)`` per axis (the fixed bias is a
-        figure whose sign the estimator does not know, so it counts as a spread), floored;
+        figure whose sign the estimator does not know, so it counts as a spread), floored
+        (:meth:`fusionbench.imu.IMUSpec.bias_prior_sigma`);
         ``gyro_bias_walk`` (3,) rad/s/sqrt(s) and ``accel_bias_walk`` (3,) m/s^2/sqrt(s): the
         bias's random walk, ``sqrt(random_walk^2 + 2 instability^2 / tau)`` (the Kalman aligner's
         process noise; zero for a constant bias); ``name``, the model's name.
@@ -61,12 +59,10 @@ def noise_model(spec):
     if not isinstance(spec, IMUSpec):
         raise ValueError(f"imu: expected a fusionbench.imu.IMUSpec or None, found {type(spec).__name__}")
     out = {"name": spec.name}
-    for sensor, e, noise_floor, bias_floor in (("gyro", spec.gyro, GYRO_NOISE_FLOOR, GYRO_BIAS_FLOOR),
-                                               ("accel", spec.accel, ACCEL_NOISE_FLOOR, ACCEL_BIAS_FLOOR)):
+    for sensor, e, noise_floor in (("gyro", spec.gyro, GYRO_NOISE_FLOOR), ("accel", spec.accel, ACCEL_NOISE_FLOOR)):
         out[f"{sensor}_noise"] = np.maximum(np.asarray(e.white), noise_floor)
-        spread = np.sqrt(np.square(e.bias) + np.square(e.bias_sigma) + np.square(e.instability))
-        out[f"{sensor}_bias_sigma"] = np.maximum(spread, bias_floor)
-        out[f"{sensor}_bias_walk"] = np.sqrt(np.square(e.random_walk) + 2 * np.square(e.instability) / e.tau)
+        out[f"{sensor}_bias_walk"] = e.bias_walk()
+    out["gyro_bias_sigma"], out["accel_bias_sigma"] = spec.bias_prior_sigma()
     return out
 
 

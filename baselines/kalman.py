@@ -131,20 +131,15 @@ class KalmanAligner(AlignerBase):
         q = np.zeros(NX)
         q[0:3] = np.square(g.white)
         q[3:5] = np.square(a.white)[:2]
-        q[5:8] = np.square(g.random_walk) + 2 * np.square(g.instability) / g.tau
-        q[8:11] = np.square(a.random_walk) + 2 * np.square(a.instability) / a.tau
+        q[5:8] = np.square(g.bias_walk())
+        q[8:11] = np.square(a.bias_walk())
         return q
 
     def _p0(self, lat=None, sigma_v=(0.1, 0.1), sigma_p=None):
         """Initial covariance (11,) or (13,): attitude, velocity (``sigma_v`` (2,) m/s), body-frame biases, and the
         position (``sigma_p`` (2,) m) when given; ``lat`` (rad) sets the default azimuth prior from the gyro bias
         (``att_sigma_deg``)."""
-        g, a = self.spec.gyro, self.spec.accel
-        eps = np.hypot(np.hypot(g.bias, g.bias_sigma), g.instability)
-        nab = np.hypot(np.hypot(a.bias, a.bias_sigma), a.instability)
-        # floors: 0.01 deg/h and 10 ug, so that a zero datasheet figure does not freeze the state
-        eps = np.maximum(eps, 0.01 * np.pi / 180 / 3600)
-        nab = np.maximum(nab, 10e-6 * 9.80665)
+        eps, nab = self.spec.bias_prior_sigma()
         att = self.att_sigma.copy()
         if self._att_sigma_u is None and lat is not None:
             ratio = min(1.0, azimuth_bias_ratio(self.spec, lat))

@@ -19,8 +19,7 @@ MAX_BIAS_TO_EARTH_RATE = 0.5
 def gyro_bias(spec) -> float:
     """The gyro bias an aligner does not know, rad/s: the largest axis of ``sqrt(bias^2 + bias_sigma^2 +
     instability^2)`` of ``spec.gyro`` (fixed, per-run random and drifting parts)."""
-    g = spec.gyro
-    return float(np.max(np.sqrt(np.square(g.bias) + np.square(g.bias_sigma) + np.square(g.instability))))
+    return float(np.max(spec.gyro.unknown_bias()))
 
 
 def azimuth_bias_ratio(spec, lat) -> float:

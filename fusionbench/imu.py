@@ -102,6 +102,17 @@ class SensorErrors:
         """The same deterministic errors (fixed bias, scale, misalignment) without any random part."""
         return SensorErrors(bias=self.bias, scale=self.scale, misalignment=self.misalignment)
 
+    def unknown_bias(self):
+        """The bias an estimator does not know, per axis: ``sqrt(bias^2 + bias_sigma^2 + instability^2)`` (3,),
+        rad/s (gyro) or m/s^2 (accel). The fixed bias counts as a spread: its sign is not known to the estimator."""
+        return np.sqrt(np.square(self.bias) + np.square(self.bias_sigma) + np.square(self.instability))
+
+    def bias_walk(self):
+        """The bias's random walk a constant-plus-walk bias state needs, per axis: ``sqrt(random_walk^2 +
+        2 instability^2 / tau)`` (3,), rad/s/sqrt(s) (gyro) or m/s^2/sqrt(s) (accel): the rate random walk plus the
+        driving noise of the Gauss-Markov instability; zero for a constant bias."""
+        return np.sqrt(np.square(self.random_walk) + 2.0 * np.square(self.instability) / self.tau)
+
 
 @dataclass(frozen=True)
 class NoiseSchedule:
@@ -129,6 +140,11 @@ def _psd_factor(t, schedules, sensor):
     return f
 
 
+#: The smallest bias-prior sigma an estimator gives a sensor (:meth:`IMUSpec.bias_prior_sigma`): 0.01 deg/h for the
+#: gyros (rad/s), 10 ug for the accelerometers (m/s^2).
+BIAS_PRIOR_FLOOR = {"gyro": 0.01 * units.DEG_PER_H, "accel": 10.0 * units.UG}
+
+
 @dataclass(frozen=True)
 class IMUSpec:
     """A complete IMU: gyro and accelerometer errors, noise schedules, a name and where it comes from."""
@@ -146,6 +162,13 @@ class IMUSpec:
     def perfect(self):
         """An error-free IMU."""
         return IMUSpec(name=f"{self.name} (perfect)")
+
+    def bias_prior_sigma(self):
+        """Sigmas of the zero-mean bias priors an estimator gives this IMU: :meth:`SensorErrors.unknown_bias`
+        floored at :data:`BIAS_PRIOR_FLOOR` (a zero datasheet figure must not freeze a bias state). Returns
+        ``(gyro (3,) rad/s, accel (3,) m/s^2)``."""
+        return (np.maximum(self.gyro.unknown_bias(), BIAS_PRIOR_FLOOR["gyro"]),
+                np.maximum(self.accel.unknown_bias(), BIAS_PRIOR_FLOOR["accel"]))
 
 
 def _spec(name, description, drift_dph, arw_dpsh, accel_bias_ug, vrw_ug_rthz, gyro_scale_ppm=0.0,

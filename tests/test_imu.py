@@ -69,6 +69,34 @@ def test_gauss_markov_instability_has_its_variance_and_correlation():
     assert rho == pytest.approx(np.exp(-1.0), abs=0.04)
 
 
+def test_the_models_bias_walk_drives_the_simulated_instability():
+    # SensorErrors.bias_walk is what a bias state's random walk must be for the simulator's Gauss-Markov bias: its
+    # innovations b[k+1] - exp(-dt/tau) b[k] have the variance sigma^2 (1 - exp(-2 dt/tau)) ~ (2 sigma^2 / tau) dt
+    sigma, tau, dt = 1e-6, 50.0, 0.1
+    errors = SensorErrors(instability=(sigma,) * 3, tau=tau)
+    data = simulate(static(5000.0), IMUSpec(gyro=errors), dt, seed=4)
+    b = (data.gyro[0, :, 0] - simulate(static(5000.0), IMUSpec(), dt).gyro[0, :, 0]) / dt
+    innovations = b[1:] - np.exp(-dt / tau) * b[:-1]
+    walk = errors.bias_walk()
+    assert walk == pytest.approx(np.full(3, sigma * np.sqrt(2.0 / tau)), rel=1e-12)
+    assert innovations.std() == pytest.approx(walk[0] * np.sqrt(dt), rel=0.03)  # 50 000 draws: 0.3 % sampling error
+    # a rate random walk adds in quadrature; a constant bias does not walk
+    both = SensorErrors(instability=(sigma,) * 3, tau=tau, random_walk=(3e-7, 0.0, 0.0)).bias_walk()
+    assert both[0] == pytest.approx(np.hypot(3e-7, sigma * np.sqrt(2.0 / tau)), rel=1e-12)
+    assert np.all(SensorErrors(bias=(1e-5,) * 3, bias_sigma=(1e-5,) * 3).bias_walk() == 0.0)
+
+
+def test_bias_priors_count_every_unknown_part_and_are_floored():
+    # fixed 3, per-run 4 (a 3-4-5 triangle), plus an instability of 12 on x: sqrt(9 + 16 + 144) = 13
+    g = SensorErrors(bias=(3e-6,) * 3, bias_sigma=(4e-6,) * 3, instability=(12e-6, 0.0, 0.0))
+    assert g.unknown_bias() == pytest.approx([13e-6, 5e-6, 5e-6], rel=1e-12)
+    gyro, accel = IMUSpec(gyro=g).bias_prior_sigma()
+    assert gyro == pytest.approx([13e-6, 5e-6, 5e-6], rel=1e-12)
+    # a perfect accelerometer's prior is the floor, 10 ug; a perfect gyro's 0.01 deg/h = 4.848e-8 rad/s
+    assert accel == pytest.approx(np.full(3, 10e-6 * 9.80665), rel=1e-12)
+    assert IMUSpec().bias_prior_sigma()[0] == pytest.approx(np.full(3, np.radians(0.01) / 3600.0), rel=1e-12)
+
+
 def test_per_run_bias_draw_has_its_sigma():
     sig = 50 * units.UG
     data = simulate(static(1.0), IMUSpec(accel=SensorErrors(bias_sigma=(sig,) * 3)), 0.1, runs=400, seed=3)
