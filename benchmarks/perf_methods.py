@@ -138,7 +138,7 @@ def main(argv=None):
            "methods": {}, "skipped": {}}
     names = args.methods or sorted(aligner.available_methods())
     for name in names:
-        cls = aligner.entry_class(aligner.GROUP, name)
+        cls = aligner.entry_class(aligner.METHODS_GROUP, name)
         sup = claims.supports(cls)
         base = base_for(sup)
         if sup.needs_init or base is None:

@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from . import earth
-from .discovery import (GROUP, available_methods, entry_class, load_entry, takes_option,  # noqa: F401
+from .discovery import (METHODS_GROUP, available_methods, entry_class, load_entry, takes_option,  # noqa: F401
                         uses_noise_model, variant)
 from .imudata import IMUData
 
@@ -273,7 +273,7 @@ def load_method(spec: str, imu=None, vref_sigma=None, **options):
     ValueError
         One line naming the method and what is available.
     """
-    cls = entry_class(GROUP, spec, "method")
+    cls = entry_class(METHODS_GROUP, spec, "method")
     if not isinstance(cls, type):
         raise ValueError(f"method {spec!r}: expected a class, found {type(cls).__name__}")
     for key, value in (("imu", imu), ("vref_sigma", vref_sigma)):

@@ -9,7 +9,7 @@ given attitude) runs through the same Monte Carlo.
 from __future__ import annotations
 
 from . import aligner, scenarios
-from .aligner import GROUP
+from .aligner import METHODS_GROUP
 
 
 class AlignmentExperiment:
@@ -17,7 +17,7 @@ class AlignmentExperiment:
 
     name = "alignment"
     kind = None  # inferred from the scenario: alignment, moving-alignment or navigation
-    method_group = GROUP
+    method_group = METHODS_GROUP
 
     def load(self, data, src):
         return scenarios.parse(data, src)

@@ -71,7 +71,7 @@ def check_not_accelerating(excess, limit, name: str):
 
 #: Kinds of base a method can claim: stationary, swaying/moored (no translation beyond a disturbance), and
 #: moving (translating, with a velocity reference).
-BASES = ("static", "sway", "moving")
+BASE_KINDS = ("static", "sway", "moving")
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ class Supports:
     Parameters
     ----------
     bases : tuple of str
-        Kinds of base (:data:`BASES`); "moving" means a translating base with a velocity reference
+        Kinds of base (:data:`BASE_KINDS`); "moving" means a translating base with a velocity reference
         (``vref``). Empty: no condition is claimed (a paper's printed parameters, kept to reproduce it).
     max_abs_lat_deg : float
         Highest |latitude| claimed, deg (gyrocompassing loses the horizontal earth rate toward the poles).
@@ -115,9 +115,9 @@ class Supports:
     max_bias_ratio_moving: float | None = None
 
     def __post_init__(self):
-        bad = [b for b in self.bases if b not in BASES]
+        bad = [b for b in self.bases if b not in BASE_KINDS]
         if bad:
-            raise ValueError(f"supports bases: expected some of {BASES}, found {bad}")
+            raise ValueError(f"supports bases: expected some of {BASE_KINDS}, found {bad}")
         if not 0.0 <= self.max_abs_lat_deg <= 90.0:
             raise ValueError(f"supports max_abs_lat_deg: expected 0 to 90 deg, found {self.max_abs_lat_deg}")
         bad = [k for k in self.aiding if k not in ("velocity", "position")]
@@ -142,7 +142,7 @@ class Supports:
         Parameters
         ----------
         base : str
-            The kind of base (:data:`BASES`).
+            The kind of base (:data:`BASE_KINDS`).
         lat_deg : float
             Latitude, deg.
         bias_ratio : float or None

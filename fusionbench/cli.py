@@ -24,7 +24,7 @@ import numpy as np
 from joblib import parallel_config
 
 from . import __version__, cli_record, progress, provenance, reportdir, scenarios
-from .aligner import GROUP, available_methods, uses_noise_model
+from .aligner import METHODS_GROUP, available_methods, uses_noise_model
 from .claims import MAX_BIAS_TO_EARTH_RATE, supports
 from .cli_common import exception_text, integer, named
 
@@ -124,7 +124,7 @@ def _cmd_list(args):
     from .experiment import all_experiments
 
     for exp_name, exp in all_experiments().items():  # methods of another kind, from the experiment that runs them
-        if exp.method_group != GROUP:
+        if exp.method_group != METHODS_GROUP:
             print(f"methods of the {exp_name} experiment:")
             for ep in sorted(entry_points(group=exp.method_group), key=lambda e: e.name):
                 print(f"  {ep.name:<28} {getattr(ep.load(), 'description', '')}")

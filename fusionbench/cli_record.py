@@ -13,7 +13,7 @@ import numpy as np
 
 from . import attitude, units
 from .aiding import MAX_DELAY_S, MAX_LEVER_ARM_M
-from .aligner import GROUP, AlignmentResult, Site, call_align, check_time_rule, load_method
+from .aligner import METHODS_GROUP, AlignmentResult, Site, call_align, check_time_rule, load_method
 from .cli_common import kind, named, seconds
 from .imu import load_spec
 
@@ -168,7 +168,7 @@ def cmd_align(args):
     from .imufiles import IMUFileError
 
     noise = None if args.imu is None else load_spec(args.imu)
-    method = named(args.method, lambda: load_method(args.method, imu=noise), group=GROUP)
+    method = named(args.method, lambda: load_method(args.method, imu=noise), group=METHODS_GROUP)
     record_site(args, {})  # what the command line gives is checked before the file is read
     aiding = read_aiding_file(args)
     imu, meta = read_record(args)
@@ -273,7 +273,8 @@ def cmd_consistency(args):
     if not methods:
         raise ValueError(f"--methods: expected comma-separated method names, found {args.methods!r}")
     for spec in methods:  # each one builds, or one line names it, before the record is read
-        named(spec, lambda: load_method(spec, imu=None if args.imu is None else load_spec(args.imu)), group=GROUP)
+        named(spec, lambda: load_method(spec, imu=None if args.imu is None else load_spec(args.imu)),
+              group=METHODS_GROUP)
     record_site(args, {})
     aiding = read_aiding_file(args)
     imu, meta = read_record(args)

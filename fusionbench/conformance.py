@@ -217,7 +217,7 @@ class ConformanceExperiment:
 
     name = "conformance"
     kind = "conformance"
-    method_group = aligner.GROUP
+    method_group = aligner.METHODS_GROUP
 
     def load(self, data, src):
         return parse(data, src)

@@ -14,9 +14,9 @@ from . import bound, claims, fields, imu, units
 from .claims import azimuth_bias_ratio
 from .drive import car_legs
 
-#: Bases of a condition: kind claimed (:data:`fusionbench.claims.BASES`), sway amplitude (deg) and frequency (Hz)
+#: Bases of a condition: kind claimed (:data:`fusionbench.claims.BASE_KINDS`), sway amplitude (deg) and frequency (Hz)
 #: of [pitch, roll, yaw].
-BASES = {
+BASE_MOTIONS = {
     "static": ("static", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
     "sway-mild": ("sway", (1.0, 1.5, 2.0), (0.2, 0.1, 0.05)),
     "sway-table1": ("sway", (5.0, 7.0, 9.0), (0.5, 0.3, 0.2)),
@@ -72,7 +72,7 @@ class Condition:
 
     @property
     def kind(self):
-        return BASES[self.base][0]
+        return BASE_MOTIONS[self.base][0]
 
     @property
     def receiver(self):
@@ -182,14 +182,14 @@ def parse(data, src="<conformance>"):
         if expect == "auto":  # refuse where the gyro bias hides the earth rate (every aligner given the model does)
             ratio = azimuth_bias_ratio(spec if cimu == sensor else imu.PRESETS[cimu], np.radians(lat))
             expect = "refuse" if ratio > claims.MAX_BIAS_TO_EARTH_RATE else "align"
-        base = fields.string(c, "base", src, choices=BASES, label=f"{label}.base")
+        base = fields.string(c, "base", src, choices=BASE_MOTIONS, label=f"{label}.base")
         conds.append(Condition(
             cname, base, lat,
             fields.number(c, "heading_deg", src, lo=-360.0, hi=360.0, label=f"{label}.heading_deg"), cimu,
             fields.number(c, "vref_sigma_mps", src, 0.0, lo=0.0, hi=10.0, label=f"{label}.vref_sigma_mps"), expect,
             fields.number(site, "lon_deg", src, DEFAULT_LON_DEG, lo=-360.0, hi=360.0, label="site.lon_deg"),
             fields.number(site, "height_m", src, DEFAULT_HEIGHT_M, lo=-1e4, hi=1e5, label="site.height_m"),
-            **_receiver(c, src, label, BASES[base][0], duration, rate),
+            **_receiver(c, src, label, BASE_MOTIONS[base][0], duration, rate),
             init_error_deg=(fields.number(c, "init_error_deg", src, lo=-180.0, hi=180.0,
                                           label=f"{label}.init_error_deg") if "init_error_deg" in c else None)))
     return Matrix(name, str(data.get("description", "")), tuple(conds), duration, rate, runs,
@@ -226,7 +226,7 @@ def condition_scenario(matrix, cond, quick=False, band_arcmin=None):
     from . import scenarios
 
     duration, runs = matrix.sized(quick)
-    _, amp, freq = BASES[cond.base]
+    _, amp, freq = BASE_MOTIONS[cond.base]
     d = {"name": f"{matrix.name}.{cond.name}",
          "description": f"conformance condition {cond.name}: {cond.base} base, {cond.lat_deg:g} deg latitude, heading "
                         f"{cond.heading_deg:g} deg, {Path(cond.imu).stem} IMU, reference noise {cond.vref_sigma_mps:g} m/s",

@@ -9,12 +9,12 @@ import inspect
 from importlib.metadata import entry_points
 
 #: The entry-point group of alignment methods (and navigators).
-GROUP = "fusionbench.methods"
+METHODS_GROUP = "fusionbench.methods"
 
 
 def available_methods():
     """Registered methods: ``{name: entry point}`` from the ``fusionbench.methods`` group."""
-    return {ep.name: ep for ep in entry_points(group=GROUP)}
+    return {ep.name: ep for ep in entry_points(group=METHODS_GROUP)}
 
 
 def entry_class(group: str, spec: str, what: str = "method"):

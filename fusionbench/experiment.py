@@ -22,7 +22,7 @@ from typing import Protocol, runtime_checkable
 
 from . import reportdir
 
-GROUP = "fusionbench.experiments"
+EXPERIMENTS_GROUP = "fusionbench.experiments"
 
 
 @runtime_checkable
@@ -34,7 +34,7 @@ class Experiment(Protocol):
     name : str
         The value of a scenario file's ``experiment`` key.
     kind : str or None
-        The scenario kind it gives (:data:`fusionbench.scenarios.KINDS`: what the figures draw and the overview
+        The scenario kind it gives (:data:`fusionbench.scenarios.SCENARIO_KINDS`: what the figures draw and the overview
         scores) when the file names none; None: inferred from the scenario's content.
     method_group : str
         Entry-point group of the methods it runs (``fusionbench.methods`` for aligners).
@@ -66,7 +66,7 @@ class Experiment(Protocol):
 
 def available_experiments():
     """Registered experiments: ``{name: entry point}`` of the ``fusionbench.experiments`` group."""
-    return {ep.name: ep for ep in entry_points(group=GROUP)}
+    return {ep.name: ep for ep in entry_points(group=EXPERIMENTS_GROUP)}
 
 
 def load_experiment(name: str, where: str = "experiment") -> Experiment:

@@ -46,7 +46,7 @@ DIVERGENCE_FLOOR_ARCMIN = 1.0
 CLIP_FACTOR = 10.0
 #: Share of the record at its end over which a method's error size is measured.
 TAIL_FRACTION = 0.1
-#: What the figures draw per scenario kind (:data:`fusionbench.scenarios.KINDS`): the stationary theoretical
+#: What the figures draw per scenario kind (:data:`fusionbench.scenarios.SCENARIO_KINDS`): the stationary theoretical
 #: limit and the settling band around it apply only to an alignment on a stationary or swaying base.
 DECORATIONS = {"alignment": {"limit": True, "band": True},
                "moving-alignment": {"limit": False, "band": False},

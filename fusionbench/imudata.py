@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = ("increment", "rate")
+SAMPLE_KINDS = ("increment", "rate")
 #: Largest angular rate any IMU measures, rad/s (about 5700 deg/s; MEMS gyros reach 2000-4000 deg/s): a sample
 #: beyond it is a unit or scaling error (deg/s read as rad/s, raw counts), not motion.
 MAX_RATE_RADPS = 100.0
@@ -99,8 +99,8 @@ class IMUData:
             self.gyro = self.gyro[None]
         if self.accel.ndim == 2:
             self.accel = self.accel[None]
-        if self.kind not in KINDS:
-            raise ValueError(f"IMUData kind: expected one of {KINDS}, found {self.kind!r}")
+        if self.kind not in SAMPLE_KINDS:
+            raise ValueError(f"IMUData kind: expected one of {SAMPLE_KINDS}, found {self.kind!r}")
         if self.t.ndim != 1 or self.t.size < 2:
             raise ValueError(f"IMUData t: expected a 1-D array of at least 2 times, found shape {self.t.shape}")
         n = self.t.size

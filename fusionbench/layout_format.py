@@ -45,12 +45,12 @@ from pathlib import Path
 import numpy as np
 
 from . import fields
+from .imudata import SAMPLE_KINDS
 from .units import ARCSEC, DEG, DEG_PER_H, DEG_PER_S, G0, MICROSECOND, MILLISECOND, NANOSECOND
 
 __all__ = ["Layout", "load_layout", "layout_from_name_or_file", "BUILTIN_LAYOUTS", "LAYOUT_KEYS", "AXES", "ROLES",
            "DELIMITERS", "TIME_UNITS", "GYRO_UNITS", "ACCEL_UNITS"]
 
-KINDS = ("rate", "increment")
 #: Accepted ``delimiter`` values: "auto" takes the first of , ; tab | found in the header (or the first row),
 #: else whitespace; "whitespace" splits at runs of spaces and tabs.
 DELIMITERS = ("auto", ",", ";", "\t", "|", "whitespace")
@@ -180,7 +180,7 @@ def _validated(d, src, label):
     d = {k: v for k, v in d.items() if v is not None}
     out = {key: fields.string(d, key, src, _DEFAULTS[key], choices, label=lab(key))
            for key, choices in (("name", None), ("description", None), ("delimiter", DELIMITERS),
-                                ("comment", None), ("kind", KINDS), ("time_unit", TIME_UNITS), ("axes", AXES))}
+                                ("comment", None), ("kind", SAMPLE_KINDS), ("time_unit", TIME_UNITS), ("axes", AXES))}
     if any(ch.isspace() for ch in out["comment"]):
         raise bad("comment", "a comment prefix without blanks ('' for none)", out["comment"])
     kind = out["kind"]

@@ -69,7 +69,7 @@ def headline(kind, metrics, has_init=False, experiment="alignment"):
     Parameters
     ----------
     kind : str
-        The scenario's kind (:data:`fusionbench.scenarios.KINDS`).
+        The scenario's kind (:data:`fusionbench.scenarios.SCENARIO_KINDS`).
     metrics : dict
         The scenario's metrics.json content.
     has_init : bool

@@ -113,8 +113,8 @@ def parser_keys():
 
 def parser_values():
     """The names a parser accepts as values: kinds, experiments, presets, bases, axes, and inline ``choices``."""
-    values = (set(scenarios.KINDS) | set(available_experiments()) | set(imu.PRESETS) | set(conformance_file.BASES)
-              | set(rolling_scheme.AXES) | set(imu._SENSORS))
+    values = (set(scenarios.SCENARIO_KINDS) | set(available_experiments()) | set(imu.PRESETS)
+              | set(conformance_file.BASE_MOTIONS) | set(rolling_scheme.AXES) | set(imu._SENSORS))
     for module in PARSERS:
         for node in ast.walk(ast.parse(inspect.getsource(module))):
             if isinstance(node, ast.keyword) and node.arg == "choices":

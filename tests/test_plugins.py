@@ -102,7 +102,7 @@ class Repeated(AlignmentExperiment):
 def plugins(monkeypatch):
     """Register the two classes as a package's entry points would."""
     found = experiment.available_experiments()
-    found["repeated"] = EntryPoint("repeated", f"{__name__}:Repeated", experiment.GROUP)
+    found["repeated"] = EntryPoint("repeated", f"{__name__}:Repeated", experiment.EXPERIMENTS_GROUP)
     monkeypatch.setattr(experiment, "available_experiments", lambda: found)
     classes = features.feature_classes() + (WorstAzimuth,)
     monkeypatch.setattr(features, "feature_classes", lambda: classes)

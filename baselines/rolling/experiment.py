@@ -9,7 +9,7 @@ from fusionbench import scenarios
 from fusionbench.check import REL_TOL
 
 from .montecarlo import run_calibration
-from .protocol import GROUP, load_calibrator
+from .protocol import CALIBRATORS_GROUP, load_calibrator
 from .scheme import scheme_events
 from .spec import parse_platform
 
@@ -29,7 +29,7 @@ class PlatformRolling:
 
     name = "platform-rolling"
     kind = "calibration"
-    method_group = GROUP
+    method_group = CALIBRATORS_GROUP
     #: Its own top-level table of the scenario file and the parser of it (the scenario's ``setup["platform"]``).
     tables = {"platform": _platform_table}
 

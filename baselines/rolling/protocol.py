@@ -25,7 +25,7 @@ from fusionbench.aligner import load_entry
 from . import model
 
 #: Entry-point group of the calibration methods.
-GROUP = "fusionbench.calibrators"
+CALIBRATORS_GROUP = "fusionbench.calibrators"
 
 
 @dataclass
@@ -125,13 +125,13 @@ class Calibrator(Protocol):
 
 def available_calibrators():
     """Registered calibration methods: ``{name: entry point}`` of the ``fusionbench.calibrators`` group."""
-    return {ep.name: ep for ep in entry_points(group=GROUP)}
+    return {ep.name: ep for ep in entry_points(group=CALIBRATORS_GROUP)}
 
 
 def load_calibrator(spec, **options) -> Calibrator:
     """A calibration method by registered name or ``module:Class`` path; ValueError naming it when there is no
     such method or it does not follow :class:`Calibrator`."""
-    obj = load_entry(GROUP, spec, "calibration method", **options)
+    obj = load_entry(CALIBRATORS_GROUP, spec, "calibration method", **options)
     if not isinstance(obj, Calibrator):
         raise ValueError(f"calibration method {spec!r}: expected an object with name, description and calibrate() "
                          "(baselines.rolling.protocol.Calibrator)")

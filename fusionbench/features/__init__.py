@@ -21,7 +21,7 @@ from functools import lru_cache
 from importlib.metadata import entry_points
 from typing import Protocol, runtime_checkable
 
-GROUP = "fusionbench.features"
+FEATURES_GROUP = "fusionbench.features"
 
 
 @runtime_checkable
@@ -115,7 +115,7 @@ class FeatureBase:
 @lru_cache(maxsize=1)
 def feature_classes():
     """The registered feature classes in the order of their report sections (their ``order``, then name)."""
-    classes = [ep.load() for ep in entry_points(group=GROUP)]
+    classes = [ep.load() for ep in entry_points(group=FEATURES_GROUP)]
     return tuple(sorted(classes, key=lambda cls: (getattr(cls, "order", 50), cls.name)))
 
 

@@ -47,7 +47,7 @@ _TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods
 #: coefficients) and ``conformance`` (the method x condition matrix). Inferred when a file gives none: from
 #: ``experiment``, then ``navigation`` when [metrics] has rmse_window_s, ``moving-alignment`` when [motion] has
 #: segments.
-KINDS = ("alignment", "moving-alignment", "navigation", "calibration", "conformance")
+SCENARIO_KINDS = ("alignment", "moving-alignment", "navigation", "calibration", "conformance")
 _SECTIONS = {
     "quick": {"duration_s", "runs"},
     "site": {"lat_deg", "lon_deg", "height_m"},
@@ -301,11 +301,11 @@ def _experiment(name, src):
 
 
 def _kind(data, src, given, has_rmse_window, moves):
-    """The scenario's ``kind`` (:data:`KINDS`): as the file gives it, else the experiment's (``given``), else
-    inferred (see KINDS)."""
+    """The scenario's ``kind`` (:data:`SCENARIO_KINDS`): as the file gives it, else the experiment's (``given``), else
+    inferred (see SCENARIO_KINDS)."""
     if "kind" in data:
-        if data["kind"] not in KINDS:
-            raise ScenarioError(f"{_where(src, 'kind')}: expected one of {KINDS}, found {data['kind']!r}")
+        if data["kind"] not in SCENARIO_KINDS:
+            raise ScenarioError(f"{_where(src, 'kind')}: expected one of {SCENARIO_KINDS}, found {data['kind']!r}")
         return data["kind"]
     if given is not None:
         return given
