@@ -1,4 +1,5 @@
-"""ADRC strapdown gyrocompass alignment from any heading (seed 000, sections 3-4).
+"""ADRC strapdown gyrocompass alignment from any heading (seed 000: Zhou, Yang and Qin, "Active disturbance rejection
+control technique to gyrocompass alignment of SINS", Control and Decision 26(9), 2011, sections 3-4).
 
 Two level channels, each a second-order plant in the level velocity error (eqs. 4-6)::
 

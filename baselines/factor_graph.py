@@ -115,8 +115,9 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
     description = ("factor-graph fine alignment (gtsam ImuFactors, earth-rate Coriolis, every aiding row against the "
                    "IMU's velocity or position at its time, bias priors from the IMU model)")
     robust = False
-    # sway (conformance, 20 runs; gtsam-robust and gtsam-adaptive alike): seed 000's case 1.21, the mild sway 0.81-1.13,
-    # the Table-1 sway at 60, 75, 80 N 1.07, 0.77, 1.05 (1.60 at 60 N before tangent_rates); tactical gyros (up to
+    # sway (conformance, 20 runs; gtsam-robust and gtsam-adaptive alike): seed 000's (Zhou 2011, ADRC gyrocompass) case
+    # 1.21, the mild sway 0.81-1.13, the Table-1 sway at 60, 75, 80 N 1.07, 0.77, 1.05 (1.60 at 60 N before
+    # tangent_rates); tactical gyros (up to
     # 0.149 of the horizontal earth rate in the matrix) on a fixed base: static 0.88-0.93 (4.88 at 60 N before the
     # tiles held the IMU's own noise), swaying 0.80-1.44 with the levels on the bias limit (the sway separates the
     # accelerometer biases); not on a moving base (the tactical drive's levels at 0.95-1.0 of their tolerance;

@@ -100,11 +100,11 @@ def tangent_rates(phi, counts, dt):
 
     gtsam (built with tangent preintegration) advances the rotation of an interval as ``theta <- theta + J_r(theta)^-1
     w dt``, first order in ``w dt``: under a sway its rotation over an interval drifts from the product of the
-    samples' rotations (2e-5 rad over 2 s of seed 000's Table-1 sway), the same way on every interval, and that left
-    the graph's azimuth -4.2 arcmin off at 1-s keyframes and 3.3 deg at 2-s ones on a perfect IMU. Each returned rate
-    is ``J_r(theta) (Log(Exp(theta) Exp(phi_i)) - theta) / dt``, with ``theta`` the exact rotation vector of the
-    interval so far, so that gtsam's ``theta`` is the exact one after every sample (and its velocity and position
-    steps, which use ``Exp(theta)`` at the sample's start, exact too).
+    samples' rotations (2e-5 rad over 2 s of seed 000's (Zhou 2011, ADRC gyrocompass) Table-1 sway), the same way on
+    every interval, and that left the graph's azimuth -4.2 arcmin off at 1-s keyframes and 3.3 deg at 2-s ones on a
+    perfect IMU. Each returned rate is ``J_r(theta) (Log(Exp(theta) Exp(phi_i)) - theta) / dt``, with ``theta`` the
+    exact rotation vector of the interval so far, so that gtsam's ``theta`` is the exact one after every sample (and its
+    velocity and position steps, which use ``Exp(theta)`` at the sample's start, exact too).
 
     Parameters
     ----------

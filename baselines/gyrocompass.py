@@ -26,8 +26,8 @@ Stages (all times configurable):
    azimuth loop.
    The compass loop cannot start from any heading: at 180 deg the compass effect sin(az) W cos L
    vanishes and its derivative has the wrong sign, so 180 deg is its unstable equilibrium (a
-   PSINS-style schedule from exactly 180 deg under seed 000's sway did not settle in 600 s). The
-   level loops, however, settle at any azimuth with steady commands that hold sin(az) and cos(az)
+   PSINS-style schedule from exactly 180 deg under seed 000's (Zhou 2011, ADRC gyrocompass) sway did not settle in 600
+   s). The level loops, however, settle at any azimuth with steady commands that hold sin(az) and cos(az)
    (eq. 19 of seed 000). From ``fit_from_s`` the least-squares form of eq. 19
    (:class:`fusionbench.compass.AzimuthFit`) reads them, and at ``shot_s`` the attitude is turned
    once by the azimuth found; the level integrators are shifted by the known change of the

@@ -43,7 +43,8 @@ from .kalman_filter import NX, FeedbackKalman
 SIGMA_FLOOR = 1e-3
 #: Largest coarse azimuth error (deg) the IMU model allows for which the fine stage on a fixed base re-runs the
 #: record from its start (:meth:`KalmanAligner._align`), over the 60-s coarse stage: navigation grade 0.3-1.5 deg at
-#: 0-80 deg of latitude, seed 000's IMU 0.6-1.3 up to 60 deg (2.4 at 75); tactical grade 16-93, the README's bench FOG
+#: 0-80 deg of latitude, seed 000's (Zhou 2011, ADRC gyrocompass) IMU 0.6-1.3 up to 60 deg (2.4 at 75); tactical grade
+#: 16-93, the README's bench FOG
 #: 8.6.
 RERUN_MAX_DEG = 2.0
 

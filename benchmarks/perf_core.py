@@ -46,7 +46,8 @@ ARCSEC = np.pi / 180 / 3600
 
 # ----------------------------------------------------------------------------------- scenarios
 def sway_trajectory(duration):
-    """Seed-000 sway at 34 N: pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz, static translation."""
+    """Seed-000 (Zhou 2011, ADRC gyrocompass) sway at 34 N: pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz, static
+    translation."""
     from fusionbench import trajectory as T
 
     d = np.radians

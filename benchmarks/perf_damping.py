@@ -1,4 +1,5 @@
-"""Seed 004's 20-hour damped navigation: wall time and peak memory of the three scenarios x three schemes.
+"""Seed 004's (Gu 2017, adaptive Schuler damping) 20-hour damped navigation: wall time and peak memory of the three
+scenarios x three schemes.
 
 Workload: the built-in scenarios ``paper004-accel-{0.005,0.02,0.05}`` (ship at sea, 5 Hz, seed-004 IMU,
 20 h), each navigated with the ``undamped``, ``fixed`` and ``adaptive`` schemes of ``damped-nav``. The IMU

@@ -1,8 +1,8 @@
 """Fine-alignment Monte Carlo wall time: kf, gtsam and eso-td, serial against joblib over all cores.
 
-Workload: 100 runs x 600 s of a stationary IMU at 34 N (seed-000 sensor, 100 Hz), zero-velocity
-reference with 0.01 m/s noise, initial guess 20', 20', 40' off (seed 001's). Serial: one process
-aligns all runs (each method's own batching). Parallel: the runs split into one chunk per core,
+Workload: 100 runs x 600 s of a stationary IMU at 34 N (seed-000 (Zhou 2011, ADRC gyrocompass) sensor, 100 Hz),
+zero-velocity reference with 0.01 m/s noise, initial guess 20', 20', 40' off (seed 001's (Zhao 2007, ESO/TD alignment)).
+Serial: one process aligns all runs (each method's own batching). Parallel: the runs split into one chunk per core,
 aligned by joblib workers (loky processes); run k's numbers do not depend on the split, which the
 script checks. ``--quick``: 10 runs x 120 s.
 

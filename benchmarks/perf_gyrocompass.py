@@ -9,8 +9,8 @@ Run from the repository root::
 
 The gyrocompass aligners, :class:`adrc.gyrocompass.ADRCGyrocompass` (``adrc``, control period 0.1 s, 10 Hz),
 its printed-parameter variant :class:`adrc.gyrocompass.ADRCPaper` (``adrc-paper``, 0.02 s, 50 Hz) and
-:class:`baselines.gyrocompass.PIDGyrocompass` (``pid``, 0.1 s, 10 Hz), on seed 000's data (see
-``benchmarks/README.md``, section *Gyrocompass benchmark*):
+:class:`baselines.gyrocompass.PIDGyrocompass` (``pid``, 0.1 s, 10 Hz), on seed 000's (Zhou 2011, ADRC gyrocompass) data
+(see ``benchmarks/README.md``, section *Gyrocompass benchmark*):
 
 * **batched**: one ``align`` call with all R runs;
 * **looped**: the same work one run at a time, ``align(imu.select_runs([k]), site, vref[k:k+1],

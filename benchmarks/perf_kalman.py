@@ -8,8 +8,9 @@ Run from the repository root::
     python benchmarks/perf_kalman.py --quick    # 5 runs x 120 s
     python benchmarks/perf_kalman.py --runs 20  # another number of runs (at either size)
 
-Workload: seed 000's Table-1 sway at 34 N, navigation-grade IMU at 100 Hz, each method from its own start (60 s of
-inertial-frame coarse alignment, then the 10-Hz filter). Four ways of aligning the same runs, for ``kf`` and ``akf``:
+Workload: seed 000's (Zhou 2011, ADRC gyrocompass) Table-1 sway at 34 N, navigation-grade IMU at 100 Hz, each method
+from its own start (60 s of inertial-frame coarse alignment, then the 10-Hz filter). Four ways of aligning the same
+runs, for ``kf`` and ``akf``:
 
 * batched numpy: ``align(data)``, one call, the filters of all runs on arrays (the default);
 * batched filterpy: ``align(data)`` with ``engine="filterpy"``: coarse stage and strapdown batched as above, one

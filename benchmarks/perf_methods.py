@@ -6,10 +6,10 @@ Run from the repository root::
     python benchmarks/perf_methods.py --quick   # 5 runs x 120 s (about 30 s)
     python benchmarks/perf_methods.py --engine numpy --methods adrc pid   # the compiled loops' NumPy reference
 
-Workload: seed 000's Table-1 sway at 34 N (pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz about a -30 deg yaw, as
-``perf_kalman.py``), navigation-grade IMU (preset ``navigation``), 100 Hz, ``simulate(..., seed=0)``. A method
-whose ``supports(cls).bases`` do not include "sway" (``coarse``, the ``gtsam`` family) gets the same trajectory
-with a zero sway amplitude ("static"); a paper variant that claims no base (``bases=()``) runs on the sway it
+Workload: seed 000's (Zhou 2011, ADRC gyrocompass) Table-1 sway at 34 N (pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz
+about a -30 deg yaw, as ``perf_kalman.py``), navigation-grade IMU (preset ``navigation``), 100 Hz, ``simulate(...,
+seed=0)``. A method whose ``supports(cls).bases`` do not include "sway" (``coarse``, the ``gtsam`` family) gets the same
+trajectory with a zero sway amplitude ("static"); a paper variant that claims no base (``bases=()``) runs on the sway it
 was published for. Navigators that need an initial attitude (``supports(cls).needs_init``: ``damped-nav``) are
 skipped.
 

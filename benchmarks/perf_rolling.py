@@ -1,4 +1,5 @@
-"""Seed 002's rolling self-calibration: wall time of the platform simulation and the 45-state EKF.
+"""Seed 002's (Ding, rolling-platform self-calibration) rolling self-calibration: wall time of the platform simulation
+and the 45-state EKF.
 
 Workload: the paper's torquing scheme (``baselines.rolling.scheme.PAPER_SCHEME``: 0.1 deg/s about south
 1800 s, east 900 s, south 1800 s, east 900 s; 5400 s, 2.7 M integration samples at 2 ms, an output

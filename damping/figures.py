@@ -1,5 +1,5 @@
-"""Seed 004's design figures from the network itself: damping ratio against q (Fig. 4), peak attitude
-error against acceleration (Fig. 5), and the acceleration -> q data and its RBF map (Figs. 6 and 8).
+"""Seed 004's (Gu 2017, adaptive Schuler damping) design figures from the network itself: damping ratio against q (Fig.
+4), peak attitude error against acceleration (Fig. 5), and the acceleration -> q data and its RBF map (Figs. 6 and 8).
 
 Written with matplotlib (Agg) into a report folder; every curve is computed here from
 :mod:`damping.network` and :mod:`damping.qmap`, none is read from the paper. Units on the axes.

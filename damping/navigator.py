@@ -1,4 +1,5 @@
-"""Free-inertial navigation with seed 004's internal horizontal damping (Sec. 4.1), method ``damped-nav``.
+"""Free-inertial navigation with seed 004's (Gu 2017, adaptive Schuler damping) internal horizontal damping (Sec. 4.1),
+method ``damped-nav``.
 
 The strapdown (:class:`fusionbench.strapdown.Strapdown`, ENU, body RFU) runs at the IMU rate; every
 ``step_s`` (1 s, the paper's step) the damping network H(s) (:mod:`damping.network`) filters the

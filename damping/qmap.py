@@ -1,4 +1,5 @@
-"""The acceleration -> q map of seed 004 (Fig. 6, eqs. 11-12), as a scikit-learn RBF regressor.
+"""The acceleration -> q map of seed 004 (Gu 2017, adaptive Schuler damping) (Fig. 6, eqs. 11-12), as a scikit-learn RBF
+regressor.
 
 Training data come from the network itself (:mod:`damping.network`): the peak attitude error of the
 north loop for a step of acceleration ``a`` is linear in ``a`` (eq. 2 is linear), so with

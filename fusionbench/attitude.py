@@ -21,8 +21,8 @@ Misalignment
 angles the exact form ``C_bn_est = exp(-[phi x]) C_bn_true`` is used, so phi is the rotation
 vector of ``C_bn_true C_bn_est^T`` (rad).
 
-Euler platform error angles (seed 000)
---------------------------------------
+Euler platform error angles (seed 000, Zhou 2011, ADRC gyrocompass)
+-------------------------------------------------------------------
 The computed frame n' is reached from n by three rotations z, x, y through
 ``alpha = [ax, ay, az]``: ``C_n'n = Rz(az) Rx(ax) Ry(ay)``, i.e. the paper's matrix
 ``C_n^n' = C_n'n^T``, and ``C_bn' = C_n^n' C_bn``. For small angles alpha equals phi.

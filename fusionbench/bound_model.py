@@ -29,8 +29,8 @@ POSITION_FLOOR = 1e-9
 #: diffuse against any receiver's position noise.
 INITIAL_POSITION_SIGMA = 1e3
 #: Order of the Butterworth band-pass that models a base's velocity disturbance on each horizontal axis
-#: (:func:`disturbance_block`; 2 states per order): order 8 changes seed 000's and a tactical IMU's bounds on a moored
-#: base with 0.05 m/s by 0.1 % in azimuth and 2 % in level.
+#: (:func:`disturbance_block`; 2 states per order): order 8 changes seed 000's (Zhou 2011, ADRC gyrocompass) and a
+#: tactical IMU's bounds on a moored base with 0.05 m/s by 0.1 % in azimuth and 2 % in level.
 DISTURBANCE_ORDER = 4
 
 

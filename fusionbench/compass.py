@@ -1,5 +1,6 @@
 """Shared machinery of gyrocompass-type aligners: the closed loop around the strapdown, the azimuth
-read from steady level commands (seed 000, eq. 19), and the one-shot azimuth correction (eqs. 17-18).
+read from steady level commands (seed 000 (Zhou 2011, ADRC gyrocompass), eq. 19), and the one-shot azimuth correction
+(eqs. 17-18).
 
 A gyrocompass drives the computed navigation frame n' with commanded angular rates ``omega_c``
 (rad/s, ENU, resolved in n') so that the velocity errors vanish. On a stationary base with the

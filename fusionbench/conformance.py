@@ -1,10 +1,10 @@
 """The conformance matrix: every registered aligner on every condition it claims, scored against the truth,
 the theoretical limit and the attainable bound (scenario ``experiment = "conformance"``).
 
-A condition is a base (static, a mild sway, seed 000's Table-1 sway, or a vehicle accelerating at 0.1 g along
-its heading with a velocity reference), a latitude, a true heading, an IMU preset and the noise of the velocity
-reference. The matrix file lists about twenty of them so that every level of every factor appears, not the full
-product. Each condition becomes an ordinary alignment scenario (:func:`condition_scenario`) run by
+A condition is a base (static, a mild sway, seed 000's (Zhou 2011, ADRC gyrocompass) Table-1 sway, or a vehicle
+accelerating at 0.1 g along its heading with a velocity reference), a latitude, a true heading, an IMU preset and the
+noise of the velocity reference. The matrix file lists about twenty of them so that every level of every factor appears,
+not the full product. Each condition becomes an ordinary alignment scenario (:func:`condition_scenario`) run by
 :func:`fusionbench.runner.run_alignment`: the methods start on their own (no initial guess but on a condition's
 ``init_error_deg``: the truth turned by that much, which a method declaring a smaller capture range must refuse),
 get the reference only where the base moves or the reference is noisy, and get the condition's IMU as their model;

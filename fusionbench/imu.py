@@ -118,7 +118,7 @@ class SensorErrors:
 class NoiseSchedule:
     """White-noise PSD multiplied by ``factor`` for ``start <= t < end`` (s).
 
-    ``factor = 100`` is seed 001's "Q x 100": the noise standard deviation grows 10 times.
+    ``factor = 100`` is seed 001's (Zhao 2007, ESO/TD alignment) "Q x 100": the noise standard deviation grows 10 times.
     ``sensors`` names which white noises it scales: ``"gyro"``, ``"accel"`` or both.
     """
 

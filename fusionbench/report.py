@@ -68,9 +68,9 @@ def error_figure(out, path):
 
 
 def azimuth_figure(out, path):
-    """Azimuth error against time (like seed 000's Figs. 3 and 4): above, the RMS over runs on a log scale over
-    the whole record; below, from the scenario's ``zoom_from_s``, median and 16-84 % band, with the limit and the
-    settling band where they apply (alignment kind). Returns the Figure."""
+    """Azimuth error against time (like seed 000's (Zhou 2011, ADRC gyrocompass) Figs. 3 and 4): above, the RMS over
+    runs on a log scale over the whole record; below, from the scenario's ``zoom_from_s``, median and 16-84 % band, with
+    the limit and the settling band where they apply (alignment kind). Returns the Figure."""
     c = run_context(out)
     t0 = out.scenario.zoom_from_s
     lim, band = out.limits[2] / units.ARCMIN, out.scenario.settling_band_arcmin

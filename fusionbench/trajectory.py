@@ -389,8 +389,8 @@ class Trajectory:
 # ------------------------------------------------------------------------- the papers' profiles
 def moored(lat, lon=0.0, h=0.0, mean=(0.0, 0.0, 0.0), amplitude=(5 * np.pi / 180, 7 * np.pi / 180, 9 * np.pi / 180),
            frequency=(0.5, 0.3, 0.2), disturbance_rms=0.05, duration=600.0, seed=0):
-    """Moored/swaying base (seed 000, Table 1 by default): sway on ``[pitch, roll, yaw]`` (rad, Hz)
-    about ``mean`` plus a band-limited linear velocity disturbance of ``disturbance_rms`` m/s per axis."""
+    """Moored/swaying base (seed 000 (Zhou 2011, ADRC gyrocompass), Table 1 by default): sway on ``[pitch, roll, yaw]``
+    (rad, Hz) about ``mean`` plus a band-limited linear velocity disturbance of ``disturbance_rms`` m/s per axis."""
     dist = VelocityDisturbance((disturbance_rms,) * 3, seed=seed) if disturbance_rms else None
     return Trajectory(lat, lon, h, EulerSway(tuple(mean), tuple(amplitude), tuple(frequency)),
                       Translation(disturbance=dist), duration)
@@ -398,7 +398,8 @@ def moored(lat, lon=0.0, h=0.0, mean=(0.0, 0.0, 0.0), amplitude=(5 * np.pi / 180
 
 def accelerating(lat, lon=0.0, h=0.0, mean=(0.0, 0.0, 0.0), accel=0.1 * 9.80665, accel_duration=None,
                  start=0.0, direction=(1.0, 0.0, 0.0), duration=400.0):
-    """Moving base (seed 001 by default: 0.1 g east from t = start until the end, or for accel_duration s)."""
+    """Moving base (seed 001 (Zhao 2007, ESO/TD alignment) by default: 0.1 g east from t = start until the end, or for
+    accel_duration s)."""
     d = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
     seg = Segment(tuple(d * accel), (duration - start) if accel_duration is None else accel_duration)
     return Trajectory(lat, lon, h, EulerSway(tuple(mean)), Translation(segments=(seg,), start=start), duration)
@@ -406,8 +407,8 @@ def accelerating(lat, lon=0.0, h=0.0, mean=(0.0, 0.0, 0.0), accel=0.1 * 9.80665,
 
 def ship(lat, lon=0.0, h=0.0, heading=0.0, accel=0.02, cruise_speed=20.0, static_s=12 * 3600.0,
          duration=20 * 3600.0, direction=(1.0, 0.0, 0.0)):
-    """Ship at sea (seed 004): sea sway pitch 1.2 deg sin(2 pi t/7), roll 1.2 deg sin(2 pi t/8),
-    yaw 0.8 deg sin(2 pi t/11) about ``heading`` (rad, clockwise from north); at rest for
+    """Ship at sea (seed 004 (Gu 2017, adaptive Schuler damping)): sea sway pitch 1.2 deg sin(2 pi t/7), roll 1.2 deg
+    sin(2 pi t/8), yaw 0.8 deg sin(2 pi t/11) about ``heading`` (rad, clockwise from north); at rest for
     ``static_s`` s, then accelerating at ``accel`` m/s^2 along ENU ``direction`` up to ``cruise_speed``
     m/s, then cruising, for ``duration`` s in all (20 h by default)."""
     deg = np.pi / 180

@@ -1,4 +1,5 @@
-"""Seed 002's family: continuous rolling self-calibration and self-alignment of a floated (ball) inertial platform.
+"""Seed 002's (Ding, rolling-platform self-calibration) family: continuous rolling self-calibration and self-alignment
+of a floated (ball) inertial platform.
 
 Seed 002 (Ding, Cai, Yang, Lian: continuous rolling self-calibration and self-alignment of a floated
 inertial platform). The inner sphere (platform frame p) carries three gyros and three accelerometers;

@@ -1,4 +1,5 @@
-"""Seed 002's 45-state EKF for continuous rolling self-calibration and self-alignment (method ``rolling-ekf``).
+"""Seed 002's (Ding, rolling-platform self-calibration) 45-state EKF for continuous rolling self-calibration and
+self-alignment (method ``rolling-ekf``).
 
 State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]`` of :mod:`baselines.rolling`: the
 attitude enters as the platform's Euler angles from North-Up-East, not as small misalignment angles,

@@ -1,7 +1,8 @@
-"""Seed 002's platform self-calibration as an experiment plug-in (``experiment = "platform-rolling"``, entry-point
-group ``fusionbench.experiments``): a scenario file with a ``[platform]`` table (:mod:`baselines.rolling.spec`), the
-Monte Carlo (:mod:`baselines.rolling.montecarlo`), the report (:mod:`baselines.rolling.report`) and the check of the
-coefficient groups; its methods are calibrators (:mod:`baselines.rolling.protocol`)."""
+"""Seed 002's (Ding, rolling-platform self-calibration) platform self-calibration as an experiment plug-in (``experiment
+= "platform-rolling"``, entry-point group ``fusionbench.experiments``): a scenario file with a ``[platform]`` table
+(:mod:`baselines.rolling.spec`), the Monte Carlo (:mod:`baselines.rolling.montecarlo`), the report
+(:mod:`baselines.rolling.report`) and the check of the coefficient groups; its methods are calibrators
+(:mod:`baselines.rolling.protocol`)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
-"""The output sensitivity figure of the rolling platform's self-calibration (seed 002, Figs. 4-7): one panel per
-group of error states, the change of an accelerometer output (ug) that an initial error of one prior standard
-deviation causes, against time. The curves come from :func:`baselines.rolling.observability.sensitivity_curves`."""
+"""The output sensitivity figure of the rolling platform's self-calibration (seed 002 (Ding, rolling-platform
+self-calibration), Figs. 4-7): one panel per group of error states, the change of an accelerometer output (ug) that an
+initial error of one prior standard deviation causes, against time. The curves come from
+:func:`baselines.rolling.observability.sensitivity_curves`."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Analytic Jacobians of seed 002's rolling-EKF model (:mod:`baselines.rolling.ekf`), in two forms.
+"""Analytic Jacobians of seed 002's (Ding, rolling-platform self-calibration) rolling-EKF model
+(:mod:`baselines.rolling.ekf`), in two forms.
 
 State ``x = [42 error coefficients (SI), phi, theta, psi (rad)]``; model in the :mod:`baselines.rolling.ekf`
 and :mod:`baselines.rolling` module notes (``f^p = g M^T e_U``, ``M = P C_pn = Rx(phi) Ry(theta)

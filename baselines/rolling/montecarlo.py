@@ -1,4 +1,5 @@
-"""The Monte Carlo of a platform self-calibration scenario (``experiment = "platform-rolling"``, seed 002).
+"""The Monte Carlo of a platform self-calibration scenario (``experiment = "platform-rolling"``, seed 002 (Ding,
+rolling-platform self-calibration)).
 
 A scenario's ``[platform]`` table describes a rolling scheme, the distribution of the true error
 coefficients and initial attitude, and the sensor noise (:func:`baselines.rolling.spec.parse_platform`). For each

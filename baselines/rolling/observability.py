@@ -1,8 +1,8 @@
 """Observability of a rolling torquing scheme: PWCS information matrix, rank, output sensitivity curves.
 
-Seed 002 (continuous rolling self-calibration of a floated inertial platform) argues that its scheme
-(:data:`baselines.rolling.scheme.PAPER_SCHEME`) makes all 45 states of its EKF observable: the information
-matrix of the piecewise-constant system along the scheme has rank 45, and the "output sensitivity
+Seed 002 (Ding, rolling-platform self-calibration) (continuous rolling self-calibration of a floated inertial platform)
+argues that its scheme (:data:`baselines.rolling.scheme.PAPER_SCHEME`) makes all 45 states of its EKF observable: the
+information matrix of the piecewise-constant system along the scheme has rank 45, and the "output sensitivity
 curves" (its Figs. 4-7) show how strongly each error coefficient drives the accelerometer outputs as
 the platform rolls. This module computes both for any :class:`~baselines.rolling.scheme.Scheme`, so a user
 can check a scheme of their own before running the filter.

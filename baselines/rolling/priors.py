@@ -9,7 +9,8 @@ import numpy as np
 from . import model
 
 #: Prior standard deviation of each coefficient group in its customary unit (filter starts at zero),
-#: and of the attitude angles (deg): wide enough for seed 002's Table 1 spreads and a coarse start.
+#: and of the attitude angles (deg): wide enough for seed 002's (Ding, rolling-platform self-calibration) Table 1
+#: spreads and a coarse start.
 PRIOR_SIGMA = {"D0": 2.0, "D1": 2.0, "D2": 0.5, "GYRO_MOUNT": 300.0, "K0": 1000.0, "K1": 1000.0, "K2": 50.0,
                "ACCEL_MOUNT": 300.0, "KT": 1000.0}
 ANGLE_SIGMA_DEG = 5.0

@@ -1,5 +1,6 @@
-"""report.md and figures of a platform self-calibration run (seed 002's rolling experiment): the platform attitude
-error, run 0's coefficient estimates against truth, and the tables of coefficient groups beside the paper's claims."""
+"""report.md and figures of a platform self-calibration run (seed 002's (Ding, rolling-platform self-calibration)
+rolling experiment): the platform attitude error, run 0's coefficient estimates against truth, and the tables of
+coefficient groups beside the paper's claims."""
 
 from __future__ import annotations
 

@@ -137,7 +137,8 @@ AXES = {"east": (1.0, 0.0, 0.0), "west": (-1.0, 0.0, 0.0), "north": (0.0, 1.0, 0
 _SOUTH = AXES["south"]
 _EAST = AXES["east"]
 _R = 0.1 * units.DEG
-#: Seed 002's scheme: 0.1 deg/s about south 1800 s, east 900 s, south 1800 s, east 900 s.
+#: Seed 002's (Ding, rolling-platform self-calibration) scheme: 0.1 deg/s about south 1800 s, east 900 s, south 1800 s,
+#: east 900 s.
 PAPER_SCHEME = Scheme(((_SOUTH, _R, 1800.0), (_EAST, _R, 900.0), (_SOUTH, _R, 1800.0), (_EAST, _R, 900.0)))
 
 

@@ -1,5 +1,5 @@
 """A comparison of two methods (``[metrics] compare = [base, candidate]``): the reduction of the level RMSE in
-the RMSE window, 100 (base - candidate) / base (seed 004's eq. 14)."""
+the RMSE window, 100 (base - candidate) / base (seed 004's (Gu 2017, adaptive Schuler damping) eq. 14)."""
 
 from __future__ import annotations
 

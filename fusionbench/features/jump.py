@@ -1,5 +1,6 @@
 """A noise-jump window (``[metrics] jump_window_s = [start, end]``, s): how each method's misalignment behaves
-before, during and after it, and how long it takes to re-converge (seed 001's R and Q jumps)."""
+before, during and after it, and how long it takes to re-converge (seed 001's (Zhao 2007, ESO/TD alignment) R and Q
+jumps)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """Attitude over windows of the run (``[metrics] rmse_window_s = [start, end]`` and ``amplitude_windows_s =
 {name = [start, end], ...}``, s): the level RMSE in one window and the half peak-to-peak of the misalignment in
-named ones (seed 004's free-inertial navigation: the Schuler oscillation with and without damping)."""
+named ones (seed 004's (Gu 2017, adaptive Schuler damping) free-inertial navigation: the Schuler oscillation with and
+without damping)."""
 
 from __future__ import annotations
 
