@@ -51,3 +51,33 @@ def numba_cache_dir():
 _os.environ.setdefault("NUMBA_CACHE_DIR", numba_cache_dir())
 if "numba" in _sys.modules:  # imported before us: make it read the directory again
     _sys.modules["numba"].core.config.reload_config()
+
+
+#: The top-level API (``import fusionbench as fb``): each name and the module it comes from, imported on first use so
+#: that ``import fusionbench`` stays light (the command line, numba's cache set-up). Submodules are names too.
+API = {
+    # align and the methods
+    "align": "api", "load_method": "aligner", "available_methods": "aligner", "Site": "aligner",
+    "AlignmentResult": "aligner",
+    # data: simulate, read, hold
+    "simulate": "imu", "IMUSpec": "imu", "SensorErrors": "imu", "PRESETS": "imu", "load_spec": "imu",
+    "IMUData": "imudata", "read_imu": "imufiles", "read_aiding": "aidingfiles", "AidingSpec": "aidingsim",
+    "simulate_aiding": "aidingsim", "Trajectory": "trajectory", "EulerSway": "trajectory", "car_drive": "drive",
+    # modules: scoring, frames, units, motion
+    "metrics": None, "attitude": None, "units": None, "earth": None, "trajectory": None, "drive": None, "imu": None,
+}
+
+
+def __getattr__(name):
+    if name not in API:
+        raise AttributeError(f"module 'fusionbench' has no attribute {name!r}")
+    import importlib
+
+    module = importlib.import_module(f"{__name__}.{API[name] or name}")
+    value = module if API[name] is None else getattr(module, name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(API))

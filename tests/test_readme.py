@@ -18,7 +18,7 @@ def _run_block(marker=None):
 
 
 def test_readme_example_runs_and_levels_on_the_limit(capsys):
-    ns = _run_block("CoarseAligner")
+    ns = _run_block("fb.align(")
     mean = ns["phi"].mean(axis=0)
     # level: accelerometer bias / g, up to the white noise averaged over 20 runs x 300 s (~0.001 arcmin)
     assert mean[:2] == pytest.approx(ns["limit"][:2], abs=0.01)
