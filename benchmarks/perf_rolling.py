@@ -48,7 +48,7 @@ import time
 import numpy as np
 from joblib import Parallel, delayed
 
-from baselines.rolling import model
+from baselines.rolling import angles, model
 from baselines.rolling.ekf import ENGINES, RollingEKF
 from baselines.rolling.priors import prior_sigma
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, Segment
@@ -98,7 +98,7 @@ def main():
         ap.error("--runs: expected a positive integer")
     cores = os.cpu_count() or 1
     coeffs = true_coeffs(runs)
-    C0 = model.angles_to_dcm(ANGLES0)
+    C0 = angles.angles_to_dcm(ANGLES0)
     print(f"seed-002 rolling self-calibration at 34 N: {scheme.duration:g} s scheme "
           f"({', '.join(f'{s.duration:g}' for s in scheme.segments)} s segments), {scheme.n_samples:,} samples "
           f"at {scheme.sample_s * 1e3:g} ms, {scheme.n_outputs:,} filter steps; N = {runs} runs, {cores} cores; "

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from baselines.rolling import ekf as R
-from baselines.rolling import jacobians, model
+from baselines.rolling import angles, jacobians, model
 from baselines.rolling import kernels as K
 from baselines.rolling.priors import prior_sigma
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, Segment
@@ -60,7 +60,7 @@ def test_error_state_jacobians_match_central_differences():
 
     def eta_after(e):
         xt, xe = R._rk4(K.inject(x, e), w, dt, LAT, 0.0), R._rk4(x, w, dt, LAT, 0.0)
-        Ct, Ce = model.angles_to_dcm(xt[model.ANGLES]), model.angles_to_dcm(xe[model.ANGLES])
+        Ct, Ce = angles.angles_to_dcm(xt[model.ANGLES]), angles.angles_to_dcm(xe[model.ANGLES])
         return -Rotation.from_matrix(Ct @ Ce.T).as_rotvec()
 
     for i in range(model.N_STATES):
@@ -80,7 +80,7 @@ def test_filter_started_on_the_truth_of_a_noise_free_run_stays_on_it():
     c = _state(2, (0.0, 0.0, 0.0))[:model.N_COEFFS]  # the filter's model is the simulator's (exact G^-1)
     a0 = np.radians([2.0, 3.0, 5.0])
     scheme = Scheme(tuple(PAPER_SCHEME.segments[:2]))  # south 1800 s, east 900 s
-    run = simulate(scheme, c, model.angles_to_dcm(a0), LAT, gyro_noise=0.0, accel_noise=0.0)
+    run = simulate(scheme, c, angles.angles_to_dcm(a0), LAT, gyro_noise=0.0, accel_noise=0.0)
     res = R.RollingEKF().calibrate(run.t[:2000], run.y[0, :2000], run.w_cmd[0, :2000], LAT,
                                    x0=np.concatenate([c, a0]))
     err = res.x - run.states[0, :2000]
@@ -111,12 +111,12 @@ def test_noise_free_paper_run_recovers_every_coefficient_within_one_percent():
 
     scn = scenarios.get("paper002-rolling")
     c, a = draw_truth(scn.setup["platform"], 0, 0)
-    run = simulate(scn.setup["platform"].scheme, c, model.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    run = simulate(scn.setup["platform"].scheme, c, angles.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(passes=2).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     est = res.final()
     assert np.all(np.abs(est[:model.N_COEFFS] - c) < 0.01 * np.abs(c))
     arcsec = np.radians(1 / 3600)
-    misalign = Rotation.from_matrix(model.angles_to_dcm(est[model.ANGLES]) @ run.C_pn[0, -1].T).magnitude()
+    misalign = Rotation.from_matrix(angles.angles_to_dcm(est[model.ANGLES]) @ run.C_pn[0, -1].T).magnitude()
     assert misalign < 0.1 * arcsec
     # a noise-free run sits well inside the filter's own sigmas (0.06 of them measured)
     assert np.max(np.abs(est[:model.N_COEFFS] - c) / res.sigma[-1, :model.N_COEFFS]) < 0.5
@@ -145,7 +145,7 @@ def test_compiled_kernels_match_the_platform_model():
     for seed, ang in ((4, (20.0, -35.0, 150.0)), (5, (-170.0, 80.0, -10.0))):
         x = _state(seed, ang)
         w = np.radians([0.1, -0.05, 0.02])
-        C = model.angles_to_dcm(x[model.ANGLES])
+        C = angles.angles_to_dcm(x[model.ANGLES])
         # the compiled code against NumPy's: a DCM entry is a sum of two products of up to three sines and cosines,
         # 4 roundings, and each factor may be up to 4 ulps from the C library's where NumPy evaluates it with its
         # own SIMD code: 16 roundings of |C| = 1. The angles: arcsin and arctan2 (4 ulps each) of entries whose
@@ -153,7 +153,7 @@ def test_compiled_kernels_match_the_platform_model():
         # measurement (size g) and the Euler rates (1/cos(theta) times three-term sums) carry the DCM's: 16 roundings
         # of their own size. A wrong sign, axis or term moves them by 1e-3 to 1 of it.
         agree_to_rounding(K.dcm(x[model.ANGLES]), C, 16, 1.0)
-        agree_to_rounding(K.angles(C), model.dcm_to_angles(C), 16, np.pi)
+        agree_to_rounding(K.angles(C), angles.dcm_to_angles(C), 16, np.pi)
         agree_to_rounding(K.measurement(x, g), model.measurement_unchecked(x, g), 16)
         ref = model.state_derivative_unchecked(x, w, g, wie)[model.ANGLES]
         agree_to_rounding(K.angle_derivative(x, w, g, wie), ref, 16)
@@ -162,7 +162,7 @@ def test_compiled_kernels_match_the_platform_model():
         C_ref = Rot.from_rotvec(-e[model.ANGLES]).as_matrix() @ C
         # through the kernel's angles and back, against scipy's rotation vector and a 3 x 3 product: the DCM's
         # 16 roundings
-        agree_to_rounding(model.angles_to_dcm(out[model.ANGLES]), C_ref, 16, 1.0)
+        agree_to_rounding(angles.angles_to_dcm(out[model.ANGLES]), C_ref, 16, 1.0)
         assert np.abs(out[model.ANGLES] - x[model.ANGLES]).max() < 0.1  # continuous: no jump of 2 pi (at theta 80 deg
         # the angles move up to 1 / cos(theta) times the 2e-3 rad turn)
         assert np.array_equal(out[:model.N_COEFFS], x[:model.N_COEFFS] + e[:model.N_COEFFS])
@@ -178,7 +178,7 @@ def test_compiled_sigmas_match_numpy():
         M = rng.standard_normal((model.N_STATES, model.N_STATES))
         P = M @ M.T / model.N_STATES + 0.1 * np.eye(model.N_STATES)
         a = x[model.ANGLES]
-        J = -jacobians.rate_inverse(a) @ model.angles_to_dcm(a).T * D[None, model.ANGLES]
+        J = -jacobians.rate_inverse(a) @ angles.angles_to_dcm(a).T * D[None, model.ANGLES]
         ref = np.sqrt(np.diag(P)) * D
         ref[model.ANGLES] = np.sqrt(np.diag(J @ P[model.ANGLES, model.ANGLES] @ J.T))
         # the coefficients' sqrt(P_ii) D_i: two roundings of the sigma; the angles' quadratic forms, summed in the
@@ -202,11 +202,11 @@ def test_second_pass_reaches_the_information_bound():
     scn = scenarios.get("paper002-rolling")
     spec = scn.setup["platform"].scaled(1800.0)
     c, a = draw_truth(spec, 0, 0)
-    run = simulate(spec.scheme, c, model.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    run = simulate(spec.scheme, c, angles.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(gyro_noise=0.0).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     bound = res.bound()[:model.N_COEFFS]
     assert np.abs(res.sigma[-1, :model.N_COEFFS] / bound - 1.0).max() < 1e-3
-    M = information_matrix(spec.scheme, scn.site.lat, C0=model.angles_to_dcm(a), coeffs=c, step_s=spec.scheme.filter_s)
+    M = information_matrix(spec.scheme, scn.site.lat, C0=angles.angles_to_dcm(a), coeffs=c, step_s=spec.scheme.filter_s)
     pwcs = prior_sigma() * np.sqrt(np.diag(np.linalg.inv(np.eye(model.N_STATES) + M)))
     assert np.abs(bound / pwcs[:model.N_COEFFS] - 1.0).max() < 0.05
     # the gyros' white drift (paper level) raises the sigmas above that bound, by up to 40 % here
@@ -225,7 +225,7 @@ def test_auto_passes_iterate_until_the_linearisation_point_is_the_answer():
     scn = scenarios.get("paper002-rolling")
     c, a = draw_truth(scn.setup["platform"], 0, 2)
     a[1] = np.radians(10.0)
-    run = simulate(scn.setup["platform"].scheme, c, model.angles_to_dcm(a), scn.site.lat, seed=12)
+    run = simulate(scn.setup["platform"].scheme, c, angles.angles_to_dcm(a), scn.site.lat, seed=12)
     two = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     auto = R.RollingEKF(passes="auto").calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     z = lambda res: np.max(np.abs(res.final()[:model.N_COEFFS] - c) / res.sigma[-1, :model.N_COEFFS])  # noqa: E731
@@ -249,7 +249,7 @@ def test_numpy_engine_matches_filterpy():
     scheme = Scheme(tuple(Segment(s.axis, s.rate, s.duration / 12) for s in base.segments),
                     command_period_s=base.command_period_s, sample_s=base.sample_s, filter_s=base.filter_s)
     c, a = draw_truth(scn.setup["platform"], 0, 0)
-    run = simulate(scheme, c, model.angles_to_dcm(a), scn.site.lat, seed=3)
+    run = simulate(scheme, c, angles.angles_to_dcm(a), scn.site.lat, seed=3)
     ref, new = (R.RollingEKF(engine=e).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
                 for e in ("filterpy", "numpy"))
     assert new.figures["passes"] == ref.figures["passes"] == 2

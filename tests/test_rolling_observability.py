@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from baselines.rolling import model
+from baselines.rolling import angles, model
 from baselines.rolling import observability as ro
 from baselines.rolling import figures as rolling_figures
 from baselines.rolling.jacobians import error_jacobians
@@ -117,9 +117,9 @@ def test_matches_the_plain_definition_with_full_45x45_exponentials():
     # at non-zero nominal coefficients (the drift Jacobian then varies with the attitude)
     scheme = Scheme(((SOUTH, RATE, 30.0), (EAST, RATE, 30.0)))
     coeffs = model.coeff_vector(True, D0_X=1.0, DI_Y=0.5, DO_Z=0.5, DIO_X=0.2, G_XY=30.0, KT_Z=100.0, K1_X=50.0)
-    C0 = model.angles_to_dcm([0.1, 0.02, -0.3])
+    C0 = angles.angles_to_dcm([0.1, 0.02, -0.3])
     t = np.arange(61.0)
-    ang = model.dcm_to_angles(commanded_path(scheme, C0, t))
+    ang = angles.dcm_to_angles(commanded_path(scheme, C0, t))
     cmd = commands(scheme, C0, LAT)
     r2 = model.PAPER_ACCEL_NOISE ** 2
     P, M = np.eye(45), np.zeros((45, 45))
@@ -150,7 +150,7 @@ def test_sensitivity_matches_the_nonlinear_simulator():
     c = np.zeros((len(names) + 1, 42))
     for r, n in enumerate(names):
         c[r + 1, IDX[n]] = 0.5 * D[IDX[n]]
-    run = simulate(scheme, c, model.angles_to_dcm(np.zeros(3)), LAT, gyro_noise=0.0, accel_noise=0.0)
+    run = simulate(scheme, c, angles.angles_to_dcm(np.zeros(3)), LAT, gyro_noise=0.0, accel_noise=0.0)
     t, S = ro.sensitivity_curves(scheme, LAT)
     sel = np.isclose(run.t % 1.0, 0.0) | np.isclose(run.t % 1.0, 1.0)
     np.testing.assert_allclose(run.t[sel], t)

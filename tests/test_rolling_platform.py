@@ -5,7 +5,7 @@ import pytest
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from baselines.rolling import model
+from baselines.rolling import angles, model
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, commanded_path, commands
 from baselines.rolling.simulator import simulate
 from fusionbench import earth, units
@@ -14,7 +14,7 @@ D = np.pi / 180
 LAT = 34 * D
 G_LOCAL = float(earth.gravity(LAT))
 SOUTH, EAST = (0.0, -1.0, 0.0), (1.0, 0.0, 0.0)
-C_ZERO = model.angles_to_dcm([0.0, 0.0, 0.0])  # x_p North, y_p Up, z_p East
+C_ZERO = angles.angles_to_dcm([0.0, 0.0, 0.0])  # x_p North, y_p Up, z_p East
 
 
 def rotvec_p(C_ref, C):
@@ -150,38 +150,38 @@ def test_angles_round_trip_and_match_scipy_extrinsic_zyx():
     rng = np.random.default_rng(2)
     ang = np.column_stack([rng.uniform(-np.pi, np.pi, 500), rng.uniform(-1.5, 1.5, 500),
                            rng.uniform(-np.pi, np.pi, 500)])
-    C = model.angles_to_dcm(ang)
+    C = angles.angles_to_dcm(ang)
     ref = Rotation.from_euler("zyx", ang[:, ::-1]).as_matrix()  # [psi, theta, phi] about fixed z, y, x
-    assert np.abs(model.P_NUE @ C - ref).max() < 1e-15
-    assert np.abs(model.dcm_to_angles(C) - ang).max() < 1e-13
-    assert model.dcm_to_angles(C.reshape(50, 10, 3, 3)).shape == (50, 10, 3)
+    assert np.abs(angles.P_NUE @ C - ref).max() < 1e-15
+    assert np.abs(angles.dcm_to_angles(C) - ang).max() < 1e-13
+    assert angles.dcm_to_angles(C.reshape(50, 10, 3, 3)).shape == (50, 10, 3)
     # Euler-angle rates: finite difference of the angles of C exp([w t x]) (central, h = 1e-4 s)
     w = rng.normal(size=(500, 3)) * 1e-2
     h = 1e-4
     Cp = C @ Rotation.from_rotvec(w * h).as_matrix()
     Cm = C @ Rotation.from_rotvec(-w * h).as_matrix()
-    fd = np.angle(np.exp(1j * (model.dcm_to_angles(Cp) - model.dcm_to_angles(Cm)))) / (2 * h)
+    fd = np.angle(np.exp(1j * (angles.dcm_to_angles(Cp) - angles.dcm_to_angles(Cm)))) / (2 * h)
     ok = np.cos(ang[:, 1]) > 0.1
-    assert np.abs(fd - model.angle_rates(ang, w))[ok].max() < 1e-9
-    assert np.abs(model.euler_rate_matrix(ang) @ model.angle_rates(ang, w)[..., None] - w[..., None]).max() < 1e-15
+    assert np.abs(fd - angles.angle_rates(ang, w))[ok].max() < 1e-9
+    assert np.abs(angles.euler_rate_matrix(ang) @ angles.angle_rates(ang, w)[..., None] - w[..., None]).max() < 1e-15
 
 
 def test_paper_scheme_keeps_the_middle_angle_far_from_gimbal_lock(record_property):
     t = np.arange(0.0, 5400.5, 1.0)
     path = commanded_path(PAPER_SCHEME, C_ZERO, t)
-    assert np.abs(model.dcm_to_angles(path)[:, 1]).max() < 1e-12  # exactly zero from the nominal start
+    assert np.abs(angles.dcm_to_angles(path)[:, 1]).max() < 1e-12  # exactly zero from the nominal start
     # the scheme ends where it began (phi -360 deg, psi 180 deg ... back to zero)
     assert np.abs(path[-1] - C_ZERO).max() < 1e-12
     # from an initial attitude off by degrees, theta stays near its initial value
     a0 = np.array([1.0, -2.0, 3.0]) * D
-    theta = model.dcm_to_angles(commanded_path(PAPER_SCHEME, model.angles_to_dcm(a0), t))[:, 1]
+    theta = angles.dcm_to_angles(commanded_path(PAPER_SCHEME, angles.angles_to_dcm(a0), t))[:, 1]
     worst = np.abs(theta).max() / D
     record_property("paper_scheme_max_theta_deg", worst)  # measured 2.236 = hypot(1, 2) deg
     # the east turns swing the initial tilt (phi0, theta0) between the two angles
     assert worst < np.hypot(1.0, 2.0) + 1e-3
     # the intrinsic reading Rz(psi) Ry(theta) Rx(phi) would pass through gimbal lock
     with pytest.warns(UserWarning, match="Gimbal lock"):
-        intrinsic = Rotation.from_matrix(model.P_NUE @ path).as_euler("ZYX")[:, 1]
+        intrinsic = Rotation.from_matrix(angles.P_NUE @ path).as_euler("ZYX")[:, 1]
     assert np.abs(intrinsic).max() > 89.0 * D
 
 
@@ -201,7 +201,7 @@ _COEFFS = model.coeff_vector(
 def test_filter_model_matches_the_simulator():
     a0 = np.array([30.0, 20.0, 40.0]) * D  # every p axis sees gravity
     scheme = Scheme(((SOUTH, 0.1 * D, 10.0),), filter_s=0.01)
-    run = quiet(scheme, _COEFFS, model.angles_to_dcm(a0))
+    run = quiet(scheme, _COEFFS, angles.angles_to_dcm(a0))
     # h(x): the filter's measurement of the true state is the simulator's noise-free output
     assert np.abs(model.measurement(run.states[0], LAT) - run.y[0]).max() < 1e-13
     # f(x): central difference of the true angles inside one command period (5 s .. 6 s)
@@ -222,8 +222,8 @@ def test_filter_model_matches_the_simulator():
     first = model.platform_rate(x[:42], w, f_p, exact=False) - run.C_pn[0, k].T @ earth.earth_rate_n(LAT)
     eps = model.gyro_drift(x[:42], f_p)
     dw = M @ M @ w - M @ (x[model.KT] * w + eps)
-    assert np.abs(fd - model.angle_rates(x[42:], first) - model.angle_rates(x[42:], dw)).max() < 1e-12
-    assert np.abs(model.angle_rates(x[42:], dw)).max() > 1e-10
+    assert np.abs(fd - angles.angle_rates(x[42:], first) - angles.angle_rates(x[42:], dw)).max() < 1e-12
+    assert np.abs(angles.angle_rates(x[42:], dw)).max() > 1e-10
     # and every gyro term the filter carries is visible far above that tolerance
     for group in (model.D0, model.D1, model.D2, model.GYRO_MOUNT, model.KT):
         xg = x.copy()
@@ -234,7 +234,7 @@ def test_filter_model_matches_the_simulator():
 def test_attitude_rate_is_the_simulators():
     """dC_pn/dt of the exact model against a central difference of the simulated attitude (5.5 s)."""
     a0 = np.array([30.0, 20.0, 40.0]) * D
-    run = quiet(Scheme(((SOUTH, 0.1 * D, 10.0),), filter_s=0.01), _COEFFS, model.angles_to_dcm(a0))
+    run = quiet(Scheme(((SOUTH, 0.1 * D, 10.0),), filter_s=0.01), _COEFFS, angles.angles_to_dcm(a0))
     k = int(round(5.5 / 0.01)) - 1
     fd = (run.C_pn[0, k + 1] - run.C_pn[0, k - 1]) / 0.02
     dC = model.attitude_rate(_COEFFS, run.C_pn[0, k], run.w_cmd[0, k], LAT)

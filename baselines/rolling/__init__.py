@@ -16,7 +16,8 @@ Modules (each imports only modules above it in this list, and :mod:`fusionbench`
 ----------------------------------------------------------------------------------
 terms : the element formulas (attitude matrix, angle rates, drifts, outputs) in plain arithmetic, one copy
     for NumPy and numba.
-model : coefficients, their names and units, attitude angles, the error model, the filter's f(x) and h(x).
+angles : the attitude angles: C_pn of [phi, theta, psi] and back, the angle rates.
+model : coefficients, their names and units, the error model, the filter's f(x) and h(x).
 scheme : rolling schemes as data, the commanded path, the torque commands, the roll phases as figure events.
 simulator : the compiled RK4 simulator of the platform (the truth).
 protocol : what a calibration method is (:class:`protocol.Calibrator`), what it returns
@@ -25,6 +26,7 @@ priors : the prior standard deviations of the 45 states (shared by the filter an
 kernels : compiled model evaluations of the filter's inner loop.
 jacobians : analytic Jacobians of f and h, in angle and in error-state form.
 observability : information matrix, rank, weakest directions and output sensitivity of a scheme.
+figures : the output sensitivity figure.
 ekf : the method ``rolling-ekf``, seed 002's 45-state EKF (and the linearised passes after it).
 spec : the scenario file's ``[platform]`` table and the per-run draw of the truth.
 montecarlo : the Monte Carlo of a platform-rolling scenario and its metrics.json figures.
@@ -34,7 +36,7 @@ experiment : the ``platform-rolling`` experiment (:class:`fusionbench.experiment
 Frames
 ------
 n : navigation frame, East-North-Up (ENU). NUE is the same frame with its axes listed North-Up-East:
-    ``v_NUE = P v_ENU`` with ``P = [[0, 1, 0], [0, 0, 1], [1, 0, 0]]`` (:data:`model.P_NUE`).
+    ``v_NUE = P v_ENU`` with ``P = [[0, 1, 0], [0, 0, 1], [1, 0, 0]]`` (:data:`angles.P_NUE`).
 p : platform frame. ``x_p`` along the X accelerometer's sensitive axis; ``y_p`` in the plane of the
     X and Y accelerometer axes, perpendicular to ``x_p``; ``z_p = x_p x y_p``.
 

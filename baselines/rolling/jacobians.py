@@ -30,7 +30,7 @@ import numpy as np
 from fusionbench import earth
 
 from . import kernels as K
-from . import model
+from . import angles, model
 
 _E1, _E2, _E3 = np.eye(3)
 
@@ -76,7 +76,7 @@ def jacobian_f(x, w_cmd, lat, h=0.0):
     """df/dx (45 x 45) at ``x`` under the command ``w_cmd`` (rad/s, p frame); rows of the coefficients are zero."""
     c, ang = x[:model.N_COEFFS], x[model.ANGLES]
     g = float(earth.gravity(lat, h))
-    w_ie_nue = model.P_NUE @ earth.earth_rate_n(lat)
+    w_ie_nue = angles.P_NUE @ earth.earth_rate_n(lat)
     M, dM = _dM(ang)
     f = g * M[1]
     w_ip, dw_dc, dw_df = K.rate_partials(np.asarray(c, dtype=float), f, np.asarray(w_cmd, dtype=float))

@@ -37,7 +37,7 @@ def dcm(a):
 
 @numba.njit(cache=True)
 def angles(C):
-    """Angles ``[phi, theta, psi]`` (rad) of ``C_pn`` (:func:`baselines.rolling.model.dcm_to_angles`)."""
+    """Angles ``[phi, theta, psi]`` (rad) of ``C_pn`` (:func:`baselines.rolling.angles.dcm_to_angles`)."""
     # M = P_NUE C: rows N, U, E of C
     theta = np.arctan2(C[1, 2], np.hypot(C[1, 0], C[1, 1]))
     psi = np.arctan2(-C[1, 1], C[1, 0])

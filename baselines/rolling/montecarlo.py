@@ -32,7 +32,7 @@ from joblib import Parallel, delayed
 from fusionbench import metrics, units
 from fusionbench.progress import bar as progress_bar
 
-from . import model
+from . import angles, model
 from .simulator import simulate
 from .spec import draw_truth
 
@@ -47,7 +47,7 @@ def _one_run(scn, spec, method_names, k, seed):
     """Simulate run k and calibrate it with every method."""
     nc = model.N_COEFFS
     c, a = draw_truth(spec, seed, k)
-    run = simulate(spec.scheme, c, model.angles_to_dcm(a), scn.site.lat, scn.site.h, spec.gyro_noise,
+    run = simulate(spec.scheme, c, angles.angles_to_dcm(a), scn.site.lat, scn.site.h, spec.gyro_noise,
                       spec.accel_noise, seed=int(np.random.SeedSequence([int(seed), int(k), 2]).generate_state(1)[0]))
     truth = run.states[0]
     out = {}
@@ -58,7 +58,7 @@ def _one_run(scn, spec, method_names, k, seed):
         wall = time.perf_counter() - t0
         # a multi-pass method's first pass is its causal filter: its attitude history gives the settling time
         causal = getattr(res, "first_pass", None) or res
-        phi, phi_causal = (metrics.misalignment_history(model.angles_to_dcm(r.x[:, model.ANGLES])[None], run.C_pn[0])[0]
+        phi, phi_causal = (metrics.misalignment_history(angles.angles_to_dcm(r.x[:, model.ANGLES])[None], run.C_pn[0])[0]
                            for r in (res, causal))  # (M, 3) rad, ENU
         settle = metrics.settling_time(run.t, phi_causal[None, :, 2] / units.ARCMIN, scn.settling_band_arcmin)[0]
         first = causal.final(spec.readout_s)[:nc] - truth[-1, :nc]

@@ -84,7 +84,7 @@ from scipy.linalg import expm
 
 from fusionbench import earth
 
-from . import model
+from . import angles, model
 from .jacobians import error_jacobians
 from .priors import prior_sigma
 from .scheme import Scheme, commanded_path, commands
@@ -103,7 +103,7 @@ def _check_inputs(scheme, lat, h, C0, coeffs, step_s):
     if not np.isfinite(h):
         raise ValueError(f"h: expected a finite height in m, found {h}")
     if C0 is None:
-        C0 = model.angles_to_dcm(np.zeros(3))
+        C0 = angles.angles_to_dcm(np.zeros(3))
     C0 = np.asarray(C0, dtype=float)
     if C0.shape != (3, 3):
         raise ValueError(f"C0: expected shape (3, 3), found {C0.shape}")
@@ -127,7 +127,7 @@ def _output_sensitivity(scheme, lat, h, C0, coeffs, step_s):
     """Times t_k (k = 1 .. N, s) and ``H_k Phi(t_k, 0)`` (N, 3, 45), SI (unscaled)."""
     n = int(round(scheme.duration / step_s))
     t = np.arange(n + 1) * step_s
-    angles = model.dcm_to_angles(commanded_path(scheme, C0, t))
+    path_angles = angles.dcm_to_angles(commanded_path(scheme, C0, t))
     cmd = commands(scheme, C0, lat)
     # the command period that holds step k, [t_k, t_k + step_s)
     ci = np.minimum(((t + 0.5 * step_s) // scheme.command_period_s).astype(int), cmd.shape[0] - 1)
@@ -135,7 +135,7 @@ def _output_sensitivity(scheme, lat, h, C0, coeffs, step_s):
     H = np.empty((n + 1, 3, model.N_STATES))
     x = np.concatenate([coeffs, np.zeros(3)])
     for k in range(n + 1):
-        x[model.ANGLES] = angles[k]
+        x[model.ANGLES] = path_angles[k]
         Fk, H[k] = error_jacobians(x, cmd[ci[k]], lat, h)
         if k < n:
             F[k] = Fk
@@ -188,7 +188,7 @@ def information_matrix(scheme, lat, h=0.0, C0=None, coeffs=None, step_s=1.0, acc
         Height, m.
     C0 : array_like, shape (3, 3), optional
         Initial attitude ``C_pn`` (p to ENU); default the zero attitude (platform axes on
-        North-Up-East, ``model.angles_to_dcm(zeros(3))``).
+        North-Up-East, ``angles.angles_to_dcm(zeros(3))``).
     coeffs : array_like, shape (42,), optional
         Nominal error coefficients (SI) to linearise at; default zeros.
     step_s : float, optional

@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from fusionbench import earth
 
-from .model import (N_COEFFS, PAPER_ACCEL_NOISE, PAPER_GYRO_NOISE, _check_coeffs, _check_dcm, _check_site,
-                    dcm_to_angles, gyro_matrix)
+from .angles import dcm_to_angles
+from .model import N_COEFFS, PAPER_ACCEL_NOISE, PAPER_GYRO_NOISE, _check_coeffs, _check_dcm, _check_site, gyro_matrix
 from .scheme import Scheme, _check_scheme, commands
 from .terms import accel_terms, drift_terms
 
