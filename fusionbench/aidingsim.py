@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .aiding import Aiding, displace, lever_offset, lever_velocity
-from .imu import run_seed_sequence
+from .imusim import run_seed_sequence
 
 #: Noise streams of a run's SeedSequence (``spawn(9)``): the velocity's is the per-increment reference's.
 _VELOCITY, _POSITION = 7, 8

@@ -27,6 +27,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import bound_model as bm
+from .aidingsim import AidingSpec
+from .imu_model import IMUSpec, _psd_factor
 from .bound_model import VREF_FLOOR, bound_error
 
 __all__ = ["attainable_bound", "bias_limit", "BiasLimit", "VREF_FLOOR", "scenario_bound", "efficiency", "BOUND_KINDS"]
@@ -256,9 +258,6 @@ def _setup(spec, duration, site, trajectory, vref_sigma, vref_dt, step_s, C_bn, 
            fixed_prior):
     """Validate the arguments and build the model: the step end times (M,) and ``(Phi, L, idx, P0, meas)`` for
     :func:`_square_root_filter`, plus the random-constant blocks' indices with ``fixed_prior``."""
-    from .imu import IMUSpec, _psd_factor
-    from .aidingsim import AidingSpec  # after .imu: imported first, aidingsim's imports are circular
-
     if not isinstance(spec, IMUSpec):
         raise bound_error("spec", "an IMUSpec", type(spec).__name__)
     if (site is None) == (trajectory is None):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import lfilter
 
-from .imu import IMUSpec, SensorErrors, VelocityReferenceSpec, _psd_factor
+from .imu_model import IMUSpec, SensorErrors, VelocityReferenceSpec, _psd_factor
 from .imudata import IMUData
 
 # stream indices inside a run's SeedSequence
