@@ -12,6 +12,7 @@ from matplotlib.ticker import FuncFormatter
 
 from . import allanfit
 from .figures import plain_log_ticks, plt, save_png
+from .identify_core import ADEV_UNITS, AXES, SENSORS
 
 __all__ = ["TERM_NAMES", "allan_figure"]
 
@@ -77,7 +78,6 @@ def _plain_ticks(ax):
 
 
 def _panel(ax, ident, sensor):
-    from .identify import ADEV_UNITS
 
     unit, scale = ADEV_UNITS[sensor]
     fits = ident.fits(sensor)
@@ -122,7 +122,6 @@ def _panel(ax, ident, sensor):
 
 
 def _legend(fig, ident):
-    from .identify import AXES, SENSORS
 
     handles = [Line2D([], [], color=c, marker="o", ms=4, lw=1.5, label=f"axis {a}: measured (68 % interval) and fit")
                for a, c in zip(AXES, _AXIS_COLORS)]
@@ -133,12 +132,10 @@ def _legend(fig, ident):
     fig.legend(handles=handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 0.305), ncol=3, frameon=False)
 
 
-def allan_figure(ident, path):
+def allan_figure(ident, path, lines):
     """Draw the Allan deviation figure of an :class:`fusionbench.identify.Identification` and save it as PNG at
-    ``path`` (atomically)."""
-    from .identify import SENSORS, summary
-
-    lines = summary(ident)
+    ``path`` (atomically); ``lines`` are its printed summary (:func:`fusionbench.identify_report.summary`), the
+    figures of each sensor drawn under its panel."""
     fig, axes = plt.subplots(1, 2, figsize=(13.0, 8.4))
     fig.subplots_adjust(left=0.06, right=0.98, top=0.92, bottom=0.37, wspace=0.16)
     for k, (ax, sensor) in enumerate(zip(axes, SENSORS)):

@@ -1,7 +1,7 @@
-"""What is written and printed of an identification (:mod:`fusionbench.identify`): the ``[imu]`` table of the
+"""What is written and printed of an identification (:mod:`fusionbench.identify_core`): the ``[imu]`` table of the
 identified spec and its TOML file (:func:`spec_table`, :func:`write_spec_toml`), ``identify.json``
 (:func:`report_dict`, :func:`write_identify_report`, with the figure ``allan.png``) and the lines the command line
-prints (:func:`summary`, :func:`poor_fit_note`). Every name here is also :mod:`fusionbench.identify`'s. Units: the
+prints (:func:`summary`, :func:`poor_fit_note`). Every public name here is also :mod:`fusionbench.identify`'s. Units: the
 datasheet units of each key (deg/h, deg/sqrt(h), ug, ...) in the spec and the summary, SI in the JSON beside them.
 """
 
@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from . import allanfit, reportdir, units
-from .identify import (_KEYS, ADEV_SI, AXES, FIGURE_FILE, FIT_P_MIN, JSON_FILE, OUTPUT, SENSORS, UNITS,
-                       Identification, _fmt, _point_p)
+from .identify_core import (ADEV_SI, AXES, FIGURE_FILE, FIT_P_MIN, JSON_FILE, OUTPUT, SENSORS, SPEC_FILE, UNITS,
+                            Identification, _fmt, _point_p, _vec, identify, spec_table)
+from .imudata import IMUData
 from .imufiles import atomic_open
 
 
@@ -29,56 +30,6 @@ def poor_fit_note(ident: Identification):
             f"{FIT_P_MIN:g}; "
             f"correlated (Gauss-Markov) noise, a vibration, a motion or a temperature drift in the record? (see "
             f"allan.png) Those axes' terms, and the spec's, are only an approximation of the sensor's noise")
-
-
-def _vec(values):
-    return "[" + ", ".join(_fmt(v) for v in values) + "]"
-
-
-def spec_table(ident: Identification):
-    """The ``[imu]`` table of the identified spec: a list of ``(key, value, comment)``, values in the keys' units
-    (full precision), only the keys of what was identified (plus the preset, name, description and the
-    placeholder bias sigmas)."""
-    x_peak, adev_peak = allanfit.gm_peak()
-    where = f" from {ident.source}" if ident.source else ""
-    rows = [("preset", "ideal", "no errors but those below: scale factors, misalignment and the fixed bias cannot "
-                                "be seen in a static record"),
-            ("name", ident.name, ""),
-            ("description", f"identified{where} by fusionbench identify: {ident.samples} samples of {ident.dt:.6g} s "
-                            f"({ident.duration / 3600:.3g} h), Allan deviation and IEEE-952 fit", "")]
-    for s in SENSORS:
-        keys, terms = _KEYS[s], {t: [ident.term(s, j, t) for j in range(3)] for t in allanfit.TERMS}
-        for t in ("N", "K"):
-            if any(x.present for x in terms[t]):
-                factor = UNITS[s][t][2]
-                rows.append((keys[t], [x.value / factor for x in terms[t]],
-                             f"{t}, Allan slope {_slope(t)}: +- {_vec(x.datasheet_sigma for x in terms[t])} "
-                             f"{UNITS[s][t][1]} (1 sigma); 0 = not significant"))
-        sig, T, floor = ident.gauss_markov(s)
-        if T is not None:
-            factor = UNITS[s]["B"][2]
-            rows.append((keys["instability"], [v / factor for v in sig],
-                         f"Gauss-Markov sigma for B = {_vec(x.datasheet for x in terms['B'])} {UNITS[s]['B'][1]}: "
-                         f"0.664 B / {adev_peak:.4f}, its Allan peak at the flicker floor"))
-            rows.append((keys["tau"], T, f"s: the fitted curve's minimum at {floor:.4g} s (geometric mean over the "
-                                         f"axes) / {x_peak:.4f}, where a Gauss-Markov's Allan deviation peaks"))
-        q = ident.quantum(s)
-        if q > 0:
-            factor = UNITS[s]["Q"][2]
-            rows.append((keys["quantum"], q / factor,
-                         f"{UNITS[s]['Q'][1]} per count = sqrt(12) Q, Q = {_vec(x.datasheet for x in terms['Q'])} "
-                         f"{UNITS[s]['Q'][1]} (mean of the axes that show it)"))
-        bias, measured = ident.bias_bound(s)
-        factor = UNITS[s]["B"][2]
-        rows.append((keys["bias_sigma"], [v / factor for v in bias],
-                     "PLACEHOLDER, replace with the datasheet's bias repeatability: a static record cannot show the "
-                     "turn-on bias; this is B" + ("" if measured.all() else
-                                                  " (the largest B the record allows where B is not seen)")))
-    return rows
-
-
-def _slope(t):
-    return {"Q": "-1", "N": "-1/2", "B": "0", "K": "+1/2", "R": "+1"}[t]
 
 
 def write_spec_toml(ident: Identification, path):
@@ -186,7 +137,7 @@ def _write_report_files(ident: Identification, folder):
     with atomic_open(folder / JSON_FILE) as fh:
         json.dump(report_dict(ident), fh, indent=1, allow_nan=False)
         fh.write("\n")
-    allan_figure(ident, folder / FIGURE_FILE)
+    allan_figure(ident, folder / FIGURE_FILE, summary(ident))
 
 
 def _pm(value, sigma):
@@ -219,3 +170,35 @@ def summary(ident: Identification):
         lines.append("rate ramp: the error model has none; reported, not in the spec")
     notes = [ident.static_note(), poor_fit_note(ident)]
     return lines + [n for n in notes if n]
+
+
+def run_identify(imu: IMUData, out_dir, *, name="identified", source="", run=0):
+    """Identify ``imu`` and write into ``out_dir``: the spec ``imu_spec.toml``, ``identify.json`` and ``allan.png``.
+
+    The folder is written whole or not at all, as a run's report (:mod:`fusionbench.reportdir`): checked before any
+    work (it must be absent, empty or a previous identify output, :data:`OUTPUT`), assembled beside it and renamed
+    into place; after an error it is as it was.
+
+    Returns
+    -------
+    list of str
+        :func:`summary` followed by one line naming the files written: what the command line prints.
+
+    Raises
+    ------
+    ValueError
+        One line: ``out_dir`` is not a folder identify may replace, a record too short, or a figure the ``[imu]``
+        parser refuses.
+    """
+    out = Path(out_dir)
+    created = reportdir.prepare([out], OUTPUT)  # refused before any work
+    try:
+        ident = identify(imu, name=name, source=source, run=run)
+        ident.to_spec()  # a figure the parser refuses stops here, before anything is written
+        with reportdir.staged(out, OUTPUT) as tmp:
+            _write_report_files(ident, tmp)
+            write_spec_toml(ident, tmp / SPEC_FILE)
+    except BaseException:
+        reportdir.remove_empty(created)
+        raise
+    return summary(ident) + [f"wrote {out / SPEC_FILE}, {out / JSON_FILE}, {out / FIGURE_FILE}"]

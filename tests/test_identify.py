@@ -359,7 +359,7 @@ def test_a_failing_figure_leaves_the_previous_output_as_it_was(small, tmp_path, 
     before = _snapshot(out)
     assert set(before) == {"imu_spec.toml", "identify.json", "allan.png"} and b'"first"' in before["imu_spec.toml"]
 
-    def half_then_fail(ident, path):
+    def half_then_fail(ident, path, lines):
         Path(path).write_bytes(b"half a figure")
         raise OSError(28, "No space left on device")
 
