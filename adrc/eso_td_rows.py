@@ -6,18 +6,18 @@ step is the mean, over the rows valid in the step (:attr:`fusionbench.aiding.Aid
 horizontal velocity error (east, north, m/s):
 
 * **a velocity row**: the strapdown's velocity at the row's time, linear between the two sample ends that bracket
-  it (:func:`fusionbench.aiding.bracket`), plus the antenna's velocity relative to the IMU
-  ``C_bn (omega_nb^b x l)`` (:func:`fusionbench.aiding.lever_velocity`; the strapdown's attitude at the end of the
-  bracketing sample, the gyros' rate over it less ``C_bn^T omega_in^n``), less the row;
+  it (:func:`fusionbench.aiding_geometry.bracket`), plus the antenna's velocity relative to the IMU
+  ``C_bn (omega_nb^b x l)`` (:func:`fusionbench.aiding_geometry.lever_velocity`; the strapdown's attitude at the end
+  of the bracketing sample, the gyros' rate over it less ``C_bn^T omega_in^n``), less the row;
 * **a row at rest**: the strapdown's velocity there less the row's velocity (its zero, or a receiver's noisy zero;
   0 where it has none), no lever arm: the IMU itself is at rest;
 * **positions only** (no velocity row in the whole aiding): positions differenced over :data:`POSITION_SPAN_S`
-  (:func:`fusionbench.aiding.enu_offset`; a new span ends at every position row) give the antenna's mean velocity
-  over the span, against the strapdown's mean velocity over it (the difference of its integral at the two ends,
-  plus the change of the lever-arm offset ``C_bn l``, :func:`fusionbench.aiding.lever_offset`), counted at the step
-  in which the span's last position is valid: no row is read before its time of validity. A mean velocity against
-  a mean velocity has no error from the vehicle's jerk (a point velocity at the middle would be off by
-  ``v'' T^2 / 24``: 0.12 m/s over 1 s in which the acceleration steps by 1 m/s^2). Why 10 s rather than
+  (:func:`fusionbench.aiding_geometry.enu_offset`; a new span ends at every position row) give the antenna's mean
+  velocity over the span, against the strapdown's mean velocity over it (the difference of its integral at the two
+  ends, plus the change of the lever-arm offset ``C_bn l``, :func:`fusionbench.aiding_geometry.lever_offset`),
+  counted at the step in which the span's last position is valid: no row is read before its time of validity. A
+  mean velocity against a mean velocity has no error from the vehicle's jerk (a point velocity at the middle would
+  be off by ``v'' T^2 / 24``: 0.12 m/s over 1 s in which the acceleration steps by 1 m/s^2). Why 10 s rather than
   consecutive rows (:meth:`fusionbench.aiding.Aiding.velocities_from_positions`): the ESO's second-order roll-off
   passes a difference's white noise to the level angles up to the rows' Nyquist rate; on a car with turns, 1-Hz
   positions of 0.5 m (2 m) left 0.5' (2') of level error differenced row to row, 0.15' (0.6') over 10 s and
@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusionbench.aiding import bracket, enu_offset, lever_offset, lever_velocity, rate_at
+from fusionbench.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity, rate_at
 
 #: Kinds of measurement: a velocity (or at-rest) row at one time; the mean over a position interval.
 POINT, INTERVAL = 0, 1

@@ -22,7 +22,7 @@ import numpy as np
 
 from fusionbench import earth
 from fusionbench.attitude import apply_misalignment
-from fusionbench.strapdown import integrate_compiled
+from fusionbench.strapdown_compiled import integrate_compiled
 
 from .eso_td_estimator import expanding_memory_gains
 from .eso_td_rows_compiled import measure, row_arrays

@@ -3,12 +3,12 @@ graph's rows, the moving-base compensation of the preintegration, and the data o
 (:mod:`baselines.graph_rows`) at the rows' times of validity.
 
 * **Rows.** A velocity row measures the antenna's velocity at ``tau = t - delay``: ``v(tau) + C_bn(tau) (omega_nb^b x
-  l)`` (:func:`fusionbench.aiding.lever_velocity`); a row at rest measures the IMU's velocity, zero (or the noisy
-  zero it reports), with no lever arm. A position row measures the antenna at ``p(tau) + C_bn(tau) l``: its ENU
-  offset from the site (:func:`fusionbench.aiding.enu_offset`) put into the graph's coordinates, the integral of
-  the ENU velocity (:func:`path_offsets`). Each row weighs ``(sigma_ref / sigma_row)^2`` on each axis it measures (its own
-  sigma, else the method's), nothing on the others. Without aiding the base is fixed: a zero velocity at every
-  increment end.
+  l)`` (:func:`fusionbench.aiding_geometry.lever_velocity`); a row at rest measures the IMU's velocity, zero (or the
+  noisy zero it reports), with no lever arm. A position row measures the antenna at ``p(tau) + C_bn(tau) l``: its ENU
+  offset from the site (:func:`fusionbench.aiding_geometry.enu_offset`) put into the graph's coordinates, the integral
+  of the ENU velocity (:func:`path_offsets`). Each row weighs ``(sigma_ref / sigma_row)^2`` on each axis it measures
+  (its own sigma, else the method's), nothing on the others. Without aiding the base is fixed: a zero velocity at
+  every increment end.
 * **Lever arm.** ``C_bn(tau) = R_k C_{b_k}^{b(tau)}`` with ``R_k`` the keyframe's attitude and the relative rotation
   from the gyros, so the lever terms ``C_{b_k}^{b(tau)} (omega_nb^b x l)`` and ``C_{b_k}^{b(tau)} l`` join the
   IMU's increments ``U`` of the tile factor and enter its attitude Jacobian exactly; only ``omega_nb^b = omega_ib^b
@@ -30,7 +30,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench import earth
-from fusionbench.aiding import bracket, enu_offset, lever_offset, lever_velocity
+from fusionbench.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
 
 from .graph_rows import (at_rows, axis_means, integral_at_rows, mean_at_rows, row_rotations, tile_increments,
                          tile_scatter, tile_sums, tiles)
@@ -297,7 +297,7 @@ def _with_motion(problem, v, p_kf, site):
 
 
 def path_offsets(v, p0, dt, site):
-    """The graph's positions less the ENU offsets from the site (:func:`fusionbench.aiding.enu_offset`) along a
+    """The graph's positions less the ENU offsets from the site (:func:`fusionbench.aiding_geometry.enu_offset`) along a
     path, (M + 1, 3), m, at the record's start and its increment ends.
 
     The graph's position is the integral of the ENU velocity ``v`` (M, 3), m/s (at the increment ends, ``dt`` s

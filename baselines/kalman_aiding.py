@@ -2,15 +2,15 @@
 
 The filter steps every ``step_s``; each row valid within a step (:attr:`fusionbench.aiding.Aiding.t_valid` in the
 step's ``(start, end]``) is compared with the strapdown's state interpolated at its valid time between the sample
-ends bracketing it (:func:`fusionbench.aiding.bracket`):
+ends bracketing it (:func:`fusionbench.aiding_geometry.bracket`):
 
 * **velocity rows** (east, north; the height is held): ``z = v + C_bn (omega_nb^b x l) - v_row``, the lever-arm
   term's attitude coupling in H (``[a x]`` with ``a = C_bn (omega_nb^b x l)``, first order; the gyro bias's
   coupling through ``omega_nb^b``, ``eps x l``, is left out: 7e-6 m/s for a 1 deg/h gyro and 1.5 m);
 * **rows at rest**: ``z = v - v_row`` (the IMU's velocity, no lever arm; ``v_row`` zero when the row has none);
 * **position rows** (east, north, m; only when the aiding measures positions, which adds the position-error states):
-  ``z = enu_offset(p, p_row) + C_bn l`` (:func:`fusionbench.aiding.enu_offset`,
-  :func:`~fusionbench.aiding.lever_offset`), ``[(C_bn l) x]`` in H.
+  ``z = enu_offset(p, p_row) + C_bn l`` (:func:`fusionbench.aiding_geometry.enu_offset`,
+  :func:`~fusionbench.aiding_geometry.lever_offset`), ``[(C_bn l) x]`` in H.
 
 A row valid ``s`` seconds before the step's end measures the state there: its H is ``H (I - F s)`` (the step's own
 error model, first order in s <= ``step_s``; the process noise between the row and the step's end, a step's at
@@ -35,7 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fusionbench import earth
-from fusionbench.aiding import bracket, displace, enu_offset, lever_offset, lever_velocity, rate_at
+from fusionbench.aiding_geometry import bracket, displace, enu_offset, lever_offset, lever_velocity, rate_at
 from fusionbench.attitude import rotvec_to_dcm, skew
 from fusionbench.strapdown import NavState, Strapdown
 
@@ -54,7 +54,8 @@ class Rows:
     Attributes
     ----------
     k, w : ndarray, shape (n,)
-        The increment containing each row's valid time and the fraction of it (:func:`fusionbench.aiding.bracket`).
+        The increment containing each row's valid time and the fraction of it
+        (:func:`fusionbench.aiding_geometry.bracket`).
     t_valid : ndarray, shape (n,)
         Valid time of each row, s.
     vel, rest, pos : ndarray of bool, shape (n,)
@@ -106,11 +107,11 @@ class Rows:
         return self
 
     def need_history(self, i0, i1) -> bool:
-        """Whether rows ``i0 .. i1 - 1`` need the states inside their step (not only at its end)."""
+        """Whether rows ``i0`` to ``i1 - 1`` need the states inside their step (not only at its end)."""
         return not self.at_end[i0:i1].all()
 
     def span(self, a, b):
-        """Indices ``(i0, i1)`` of the rows in the increments ``a .. b - 1``."""
+        """Indices ``(i0, i1)`` of the rows in the increments ``a`` to ``b - 1``."""
         return int(np.searchsorted(self.k, a, side="left")), int(np.searchsorted(self.k, b, side="left"))
 
 
@@ -150,7 +151,7 @@ def zero_velocity_rows(k_end, runs, sigma) -> Rows:
 
 
 def step_measurement(rows, i0, i1, a, state, w_ib, F):
-    """The measurement of rows ``i0 .. i1 - 1`` in the step whose first increment is ``a``: per channel (east, north
+    """The measurement of rows ``i0`` to ``i1 - 1`` in the step whose first increment is ``a``: per channel (east, north
     velocity; east, north position) the rows' weighted mean (module docstring).
 
     Parameters
@@ -249,8 +250,8 @@ def initial_motion(aiding, t, C0, w_ib, lat, runs, vref_sigma, position_sigma, a
 
     Velocity rows (and rows at rest) at ``t`` (s) interpolated, or velocities differenced from the position rows
     (:meth:`fusionbench.aiding.Aiding.velocities_from_positions`), less the lever arm's velocity with the attitude
-    ``C0`` (R, 3, 3) and the body rate ``w_ib`` (R, 3) rad/s there (:func:`~fusionbench.aiding.lever_velocity`, the
-    earth rate removed); zero without aiding. The position from the position rows less ``C0 l``.
+    ``C0`` (R, 3, 3) and the body rate ``w_ib`` (R, 3) rad/s there (:func:`~fusionbench.aiding_geometry.lever_velocity`,
+    the earth rate removed); zero without aiding. The position from the position rows less ``C0 l``.
 
     Parameters
     ----------

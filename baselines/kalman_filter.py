@@ -36,7 +36,7 @@ import numpy as np
 from fusionbench import earth
 from fusionbench.attitude import rotvec_to_dcm, skew
 
-from fusionbench.aiding import displace
+from fusionbench.aiding_geometry import displace
 
 from .kalman_aiding import step_measurement
 

@@ -28,11 +28,12 @@ def ship_trajectory(duration):
     """Ship-like sway (pitch 1.2 deg at 1/7 Hz, roll 1.2 deg at 1/8 Hz, yaw 0.8 deg at 1/11 Hz),
     static for 60 % of ``duration`` (12 h of 20 h), then east at 0.05 m/s^2 up to 20 m/s."""
     from fusionbench import trajectory as T
+    from fusionbench.translation import Translation, accelerate_to
 
     d = np.radians
     sway = T.EulerSway(mean=(0.0, 0.0, 0.0), amplitude=tuple(d([1.2, 1.2, 0.8])),
                        frequency=(1 / 7, 1 / 8, 1 / 11), phase=(0.0, 0.0, 0.0))
-    move = T.Translation(segments=(T.accelerate_to(20.0, 0.05, (1.0, 0.0, 0.0)),), start=0.6 * duration)
+    move = Translation(segments=(accelerate_to(20.0, 0.05, (1.0, 0.0, 0.0)),), start=0.6 * duration)
     return T.Trajectory(d(34.0), d(108.0), 0.0, attitude=sway, translation=move, duration=duration)
 
 

@@ -120,6 +120,7 @@ def bench_strapdown(data, duration, repeat):
     import numba
 
     from fusionbench import strapdown as S
+    from fusionbench import strapdown_compiled as K
 
     tr = sway_trajectory(duration)
     g, a = data.gyro, data.accel
@@ -128,23 +129,23 @@ def bench_strapdown(data, duration, repeat):
     st1 = initial_state(tr, 1)
     chunk = min(STRAPDOWN_CHUNK, n)
     rec = 100
-    # big enough for the threaded kernel (runs x samples >= S.PARALLEL_MIN_WORK), which the batch uses
-    tiny = (np.zeros((runs, max(10, S.PARALLEL_MIN_WORK // runs + 1), 3)),) * 2
+    # big enough for the threaded kernel (runs x samples >= K.PARALLEL_MIN_WORK), which the batch uses
+    tiny = (np.zeros((runs, max(10, K.PARALLEL_MIN_WORK // runs + 1), 3)),) * 2
     tiny1 = (np.zeros((1, 10, 3)), np.zeros((1, 10, 3)))
 
     # compile time: a fresh, uncached copy of the threaded kernel (the library's own has cache=True),
     # swapped in for one call so that Strapdown.run passes it its usual arguments
-    library_kernel = S._integrate_parallel
-    S._integrate_parallel = numba.njit(cache=False, parallel=True)(S._integrate_kernel)
+    library_kernel = K._integrate_parallel
+    K._integrate_parallel = numba.njit(cache=False, parallel=True)(K._integrate_kernel)
     try:
         t_compile, _, _ = timed(lambda: S.Strapdown(st, DT).run(*tiny, record_every=5))
     finally:
-        S._integrate_parallel = library_kernel
+        K._integrate_parallel = library_kernel
     # warm-up of the library kernels (cache load if their on-disk cache is valid, else a compile):
     # the threaded one for the batch, the serial one for the one-run loop
     t_first, _, _ = timed(lambda: S.Strapdown(st, DT).run(*tiny, record_every=5))
     S.Strapdown(st1, DT).run(*tiny1, record_every=5)
-    cache_hit = sum(S._integrate_parallel.stats.cache_hits.values()) > 0
+    cache_hit = sum(K._integrate_parallel.stats.cache_hits.values()) > 0
 
     # numba batched: one integrator for all runs, fed chunk by chunk
     chunks = _split(g, a, chunk)

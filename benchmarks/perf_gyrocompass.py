@@ -171,7 +171,7 @@ _PARTS = [
     ("ESO update (incl. fal)", "primitives.py", "fal"),
     ("TD update (excl. fhan)", "primitives.py", "update@TrackingDifferentiator"),
     ("NLSEF (excl. fhan)", "primitives.py", "nlsef"),
-    ("strapdown kernel (_integrate_numba)", "strapdown.py", "_integrate_numba"),
+    ("strapdown kernel (_integrate_numba)", "strapdown_compiled.py", "_integrate_numba"),
     ("Strapdown.run wrapper (checks, copies)", "strapdown.py", "run"),
     ("CommandLoop step (slicing, vref mean)", "compass.py", "__iter__"),
     ("AzimuthFit.add", "compass.py", "add"),

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .aiding import Aiding, displace, lever_offset, lever_velocity
+from .aiding import Aiding
+from .aiding_geometry import displace, lever_offset, lever_velocity
 from .imusim import run_seed_sequence
 
 #: Noise streams of a run's SeedSequence (``spawn(9)``): the velocity's is the per-increment reference's.
@@ -77,7 +78,7 @@ def epochs(rate_hz, duration, grid=None):
 
 
 def simulate_aiding(trajectory, spec: AidingSpec, duration=None, runs=1, seed=0, first_run=0, grid=None) -> Aiding:
-    """The rows a receiver ``spec`` delivers on ``trajectory`` for runs ``first_run .. first_run + runs - 1``.
+    """The rows a receiver ``spec`` delivers on ``trajectory`` for runs ``first_run`` to ``first_run + runs - 1``.
 
     On a fixed base (a static, swaying or moored trajectory: no translation but a disturbance) the receiver reports
     the nominal motion (zero velocity, the site) and the rows are marked at rest when they measure no position;

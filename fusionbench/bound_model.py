@@ -193,7 +193,7 @@ def disturbance_block(dist, F, Qc, P0, rows):
     """Append a model of a base's velocity disturbance that the measurements do not report to the continuous error
     model ``F``, ``Qc`` (M, n, n) and the initial variances ``P0`` (n,).
 
-    The disturbance (:class:`fusionbench.trajectory.VelocityDisturbance`) has on each ENU axis an rms velocity
+    The disturbance (:class:`fusionbench.translation.VelocityDisturbance`) has on each ENU axis an rms velocity
     spread uniformly over its band ``[f1, f2]`` Hz (its spectrum over the random frequencies and phases). Its
     velocity ``v_d`` on each horizontal axis with an rms is modelled as white noise through a Butterworth band-pass
     of order :data:`DISTURBANCE_ORDER` over that band (its spectrum peaks at 97 % of the flat one, is half of that at
@@ -330,7 +330,7 @@ def aiding_rows(aiding, duration, k, n, site, trajectory, C_bn, disturbance=None
     displacement (``disturbance``: the ``"velocity"`` and ``"position"`` (2, n) rows of :func:`disturbance_block`).
     Returns the steps ending at a row (K,) (epoch j ends step j k), ``H`` (K, m, n) (velocity rows first) and the
     rows' stds (K, m), m/s and m, scaled by the aiding's schedules."""
-    from .aiding import lever_offset, lever_velocity
+    from .aiding_geometry import lever_offset, lever_velocity
     from .aidingsim import epochs
 
     tv = epochs(aiding.rate_hz, duration)

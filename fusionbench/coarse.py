@@ -31,7 +31,7 @@ from .aligner_base import AlignerBase
 from .attitude import rotvec_to_dcm
 from .claims import Supports
 from .coarse_aided import aided_fit, aiding_rows, fit_rotation, imu_at_rows, place
-from .coarse_inertial import c_n_i0
+from .coarse_inertial import c_n_i0, gravity_integral_inertial
 from .coarse_kernel import body_pass, body_pass_numpy
 from .coarse_level import relevel
 from .compass import check_engine
@@ -86,37 +86,6 @@ class CoarseAligner(AlignerBase):
         w = np.cumsum(dth, axis=1)[:, idx] / span
         f = np.cumsum(dv, axis=1)[:, idx] / span
         return AlignmentResult(self.name, t[idx], triad(f, w))
-
-
-def gravity_integral_inertial(t, lat, g):
-    """Velocity integral of the stationary specific force in the inertial frame i0.
-
-    i0 is the ENU frame at ``t = 0`` frozen in inertial space; the site turns about the earth axis
-    ``u = [0, cos L, sin L]`` (in i0) at ``W = OMEGA_IE``, so the specific force
-    ``[0, 0, g]`` of a stationary IMU is ``exp([u x] W tau) [0, 0, g]`` in i0 and its integral is::
-
-        V(t) = t f + (1 - cos W t) / W [u x] f + (t - sin(W t) / W) [u x]^2 f
-
-    Parameters
-    ----------
-    t : array_like, shape (M,)
-        Times since the start, s.
-    lat : float
-        Latitude, rad.
-    g : float
-        Gravity, m/s^2.
-
-    Returns
-    -------
-    ndarray, shape (M, 3)
-        V(t) in i0, m/s.
-    """
-    W = earth.OMEGA_IE
-    u = np.array([0.0, np.cos(lat), np.sin(lat)])
-    K = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
-    f = np.array([0.0, 0.0, g])
-    t = np.asarray(t, dtype=float)[:, None]
-    return t * f + (1 - np.cos(W * t)) / W * (K @ f) + (t - np.sin(W * t) / W) * (K @ K @ f)
 
 
 

@@ -25,10 +25,10 @@ same times (it is known at the increment ends; a row between two is weighted lin
 * **The local frame** ``C_n^i0(t)`` turns with the earth and is carried over it by the velocities (rows and
   bridges) integrated from the site (:func:`fusionbench.coarse_inertial.integrate_track`).
 * **The lever arm**: a row measures the antenna, ``v + C_bn (omega_nb^b x l)``, which needs the attitude: the rows
-  are fitted as they are, the lever velocity (:func:`fusionbench.aiding.lever_velocity`) computed with the attitude
-  found (``omega_nb^b`` the gyros' mean rate over the row's increment or interval less the navigation frame's rate)
-  is taken off, and the rows are fitted again, :data:`PASSES` times (a 1.5-m lever arm on a car turning at 5 deg/s:
-  1.3 arcmin of azimuth ignored, 8e-4 after one pass, 8e-5 after two).
+  are fitted as they are, the lever velocity (:func:`fusionbench.aiding_geometry.lever_velocity`) computed with the
+  attitude found (``omega_nb^b`` the gyros' mean rate over the row's increment or interval less the navigation
+  frame's rate) is taken off, and the rows are fitted again, :data:`PASSES` times (a 1.5-m lever arm on a car
+  turning at 5 deg/s: 1.3 arcmin of azimuth ignored, 8e-4 after one pass, 8e-5 after two).
 * **The blocks**: the rows' noise enters ``V_i0`` row by row, so both sides are averaged over ``fit_points`` blocks
   tiling the second half of the rows (by number), less their means over the first quarter (the anchor): rows at
   every increment end (``Aiding.from_vref``) tile the record as the per-increment fit of earlier versions did (in
@@ -45,7 +45,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import earth
-from .aiding import bracket, lever_velocity, rate_at
+from .aiding_geometry import bracket, lever_velocity, rate_at
 from .coarse_inertial import integrate_track, velocity_integral_inertial
 from .coarse_position import displacement_integral, displacements, project_line
 
@@ -121,7 +121,7 @@ def aiding_rows(aiding, runs, who) -> Rows:
 @dataclass
 class Placement:
     """Where the rows fall on the IMU record (:func:`place`): for each row (K,) the increment ``k`` it falls in and
-    its fraction ``w`` of it (:func:`fusionbench.aiding.bracket`), the nearest increment end ``near`` (-1: the
+    its fraction ``w`` of it (:func:`fusionbench.aiding_geometry.bracket`), the nearest increment end ``near`` (-1: the
     initial state); the interval ``(a, b)`` (s) over which a row's velocity is a mean (``wide`` rows, differenced
     positions; ``a == b`` otherwise) and the same for its ends ``(ka, wa)``, ``(kb, wb)``; the increment ends
     ``bridge`` (B,) where the IMU bridges the gaps (module docstring); for position rows (the position form) the
@@ -201,7 +201,7 @@ def at_samples(out, kept, s, first):
 
 def mean_rate(dth, dt, pl):
     """The gyros' rate (R, K, 3), rad/s, body frame, at each row of :class:`Placement` ``pl``
-    (:func:`fusionbench.aiding.rate_at`), or the mean over a wide row's interval (the angle increments ``dth`` (R, N, 3) rad summed, their non-commutativity, second order in the angle,
+    (:func:`fusionbench.aiding_geometry.rate_at`), or the mean over a wide row's interval (the angle increments ``dth`` (R, N, 3) rad summed, their non-commutativity, second order in the angle,
     neglected); ``dt`` the sample interval, s."""
     rate = rate_at(dth, dt, pl.k, pl.w)
     if pl.wide.any():

@@ -1,7 +1,7 @@
-"""The inertial-frame coarse alignment's integrals on a moving base: the local ENU frame in the inertial frame i0
-(the earth's rotation and the vehicle's transport over it), the vehicle's track from its velocity, and the velocity
-integral of the specific force in i0 from a velocity reference (:class:`fusionbench.coarse.InertialCoarseAligner`
-with aiding, :mod:`fusionbench.coarse_aided`).
+"""The inertial-frame coarse alignment's integrals: the stationary specific force in the inertial frame i0, and on a
+moving base the local ENU frame in the inertial frame i0 (the earth's rotation and the vehicle's transport over it),
+the vehicle's track from its velocity, and the velocity integral of the specific force in i0 from a velocity
+reference (:class:`fusionbench.coarse.InertialCoarseAligner` with aiding, :mod:`fusionbench.coarse_aided`).
 
 Frames: i0 is the ENU frame at the instant ``t_start`` frozen in inertial space; n the local ENU frame; SI units
 (rad, m, s, m/s).
@@ -12,6 +12,37 @@ from __future__ import annotations
 import numpy as np
 
 from . import earth
+
+
+def gravity_integral_inertial(t, lat, g):
+    """Velocity integral of the stationary specific force in the inertial frame i0.
+
+    i0 is the ENU frame at ``t = 0`` frozen in inertial space; the site turns about the earth axis
+    ``u = [0, cos L, sin L]`` (in i0) at ``W = OMEGA_IE``, so the specific force
+    ``[0, 0, g]`` of a stationary IMU is ``exp([u x] W tau) [0, 0, g]`` in i0 and its integral is::
+
+        V(t) = t f + (1 - cos W t) / W [u x] f + (t - sin(W t) / W) [u x]^2 f
+
+    Parameters
+    ----------
+    t : array_like, shape (M,)
+        Times since the start, s.
+    lat : float
+        Latitude, rad.
+    g : float
+        Gravity, m/s^2.
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        V(t) in i0, m/s.
+    """
+    W = earth.OMEGA_IE
+    u = np.array([0.0, np.cos(lat), np.sin(lat)])
+    K = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+    f = np.array([0.0, 0.0, g])
+    t = np.asarray(t, dtype=float)[:, None]
+    return t * f + (1 - np.cos(W * t)) / W * (K @ f) + (t - np.sin(W * t) / W) * (K @ K @ f)
 
 
 def _c_ne(lat, dlon):

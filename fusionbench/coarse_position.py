@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .aiding import enu_offset, lever_offset
+from .aiding_geometry import enu_offset, lever_offset
 from .coarse_inertial import cumulative_trapezoid
 
 

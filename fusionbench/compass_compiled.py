@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .strapdown import integrate_compiled
+from .strapdown_compiled import integrate_compiled
 
 
 def loop_arrays(loop, fit):

@@ -68,7 +68,7 @@ class Drive:
     start: float = 0.0
     pitch: float = 0.0
     roll: float = 0.0
-    #: The translation protocol of :class:`fusionbench.trajectory.Translation`: a drive has no disturbance.
+    #: The translation protocol of :class:`fusionbench.translation.Translation`: a drive has no disturbance.
     disturbance = None
 
     def _table(self):
@@ -108,7 +108,7 @@ class Drive:
         rates = np.stack([np.zeros_like(r), np.zeros_like(r), -r], axis=-1)
         return attitude.euler_to_dcm(euler), euler_rates_to_body(euler, rates)
 
-    # the translation protocol (fusionbench.trajectory.Translation)
+    # the translation protocol (fusionbench.translation.Translation)
     def _knots(self):
         """Leg boundaries (s) and the velocity there (ENU, m/s): where the position integration restarts."""
         tk, sk, hk, _, _ = self._table()

@@ -2,7 +2,7 @@
 
 A stationary, swaying or moored base keeps its place: over any stretch of the record the specific force, carried
 with the gyros into the body frame at the stretch's start (``V_b(t) = int C_b^b0 f^b``), equals gravity turning
-with the earth (:func:`fusionbench.coarse.gravity_integral_inertial`) seen through one rotation. A vehicle that
+with the earth (:func:`fusionbench.coarse_inertial.gravity_integral_inertial`) seen through one rotation. A vehicle that
 drives adds its change of velocity, which no rotation explains. So, per window (half-overlapping, covering the
 record), the rotation is fitted (Wahba's problem, with a common scale for the accelerometers' scale and vertical
 bias) and the residual's **horizontal** part (heave and the vertical accelerometer errors are along gravity) is
@@ -43,7 +43,8 @@ import numpy as np
 
 from . import earth
 from .claims import check_not_accelerating
-from .strapdown import _rodrigues3
+from .coarse_inertial import gravity_integral_inertial
+from .strapdown_compiled import _rodrigues3
 
 #: Lengths of the windows fitted one by one, s, beside the whole record: the short ones see a brief change of
 #: velocity, the long ones a steady acceleration (which a short window takes for a tilt).
@@ -151,7 +152,6 @@ def _integrated(imu):
 
 def _windows(tk, V, site, W, block_s):
     """:func:`window_residual` on the integrated specific force ``V`` at times ``tk``, windows of ``W`` s."""
-    from .coarse import gravity_integral_inertial
 
     R, T = V.shape[0], tk[-1]
     starts = np.arange(0.0, max(T - W, 0.0) + 1e-9, W / 2)

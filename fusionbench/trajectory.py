@@ -1,8 +1,8 @@
 """Motion profiles: the true attitude, velocity and position of the IMU as analytic functions of time.
 
 A :class:`Trajectory` combines an attitude profile (Euler-angle sway, or a turntable rotation
-sequence) with a translational profile (constant-acceleration segments in ENU plus an optional
-band-limited velocity disturbance) at a site. From it come, exactly:
+sequence; here) with a translational profile (constant-acceleration segments in ENU plus an optional
+band-limited velocity disturbance; :mod:`fusionbench.translation`) at a site. From it come, exactly:
 
 * the truth (``C_bn``, ``v_n``, latitude, longitude, height) at any times;
 * the true angular rate ``omega_ib^b`` (rad/s) and specific force ``f^b`` (m/s^2) in the body frame;
@@ -24,6 +24,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from . import attitude, earth
+from .translation import Segment, Translation, VelocityDisturbance, accelerate_to
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 
@@ -142,101 +143,6 @@ class RotationSequence:
         if starts:
             C[t < 0] = starts[0][1]
         return C, w
-
-
-# ----------------------------------------------------------------------- translational profiles
-@dataclass(frozen=True)
-class Segment:
-    """Constant acceleration in ENU (m/s^2) for a duration (s)."""
-
-    accel: tuple
-    duration: float
-
-
-@dataclass(frozen=True)
-class VelocityDisturbance:
-    """Band-limited random velocity of the base: a sum of sinusoids per ENU axis.
-
-    The base moves with ``v_d(t) = sum_i a_i sin(2 pi f_i t + p_i)`` on each axis, frequencies
-    uniform in ``band`` and phases uniform, scaled so that the RMS velocity on each axis is
-    ``rms`` (m/s). It is deterministic given ``seed``, smooth (so the IMU sees its exact
-    acceleration), and its displacement stays bounded, as for a moored or quasi-static base.
-    """
-
-    rms: tuple = (0.0, 0.0, 0.0)
-    band: tuple = (0.1, 2.0)
-    components: int = 16
-    seed: int = 0
-
-    def _tables(self):
-        rng = np.random.default_rng(self.seed)
-        f = rng.uniform(self.band[0], self.band[1], (3, self.components))
-        p = rng.uniform(0, 2 * np.pi, (3, self.components))
-        a = np.sqrt(2.0 / self.components) * np.asarray(self.rms, dtype=float)[:, None] * np.ones_like(f)
-        return a, 2 * np.pi * f, p
-
-    def evaluate(self, t):
-        """Velocity (N, 3) m/s, acceleration (N, 3) m/s^2 and displacement (N, 3) m, ENU."""
-        t = np.asarray(t, dtype=float)
-        a, w, p = self._tables()
-        arg = w[None] * t[:, None, None] + p[None]
-        v = np.sum(a * np.sin(arg), axis=-1)
-        acc = np.sum(a * w * np.cos(arg), axis=-1)
-        disp = np.sum(a / w * (np.cos(p) - np.cos(arg)), axis=-1)
-        return v, acc, disp
-
-
-@dataclass(frozen=True)
-class Translation:
-    """Velocity in ENU from rest-or-``v0`` through constant-acceleration segments, then constant.
-
-    Parameters
-    ----------
-    v0 : (3,) array_like
-        Initial velocity, ENU, m/s.
-    segments : sequence of Segment
-        Acceleration segments, applied one after the other from ``start`` (s).
-    start : float
-        Time the first segment begins, s.
-    disturbance : VelocityDisturbance, optional
-        Added band-limited velocity.
-    """
-
-    v0: tuple = (0.0, 0.0, 0.0)
-    segments: tuple = ()
-    start: float = 0.0
-    disturbance: VelocityDisturbance | None = None
-
-    def _knots(self):
-        t = [self.start]
-        v = [np.asarray(self.v0, dtype=float)]
-        for s in self.segments:
-            v.append(v[-1] + np.asarray(s.accel, dtype=float) * s.duration)
-            t.append(t[-1] + s.duration)
-        return np.array(t), np.array(v)
-
-    def is_static(self):
-        return not self.segments and not np.any(self.v0)
-
-    def mean_velocity(self, t):
-        """Velocity (N, 3) m/s and acceleration (N, 3) m/s^2 without the disturbance."""
-        t = np.asarray(t, dtype=float)
-        tk, vk = self._knots()
-        v = np.empty(t.shape + (3,))
-        a = np.zeros(t.shape + (3,))
-        for i in range(3):
-            v[..., i] = np.interp(t, tk, vk[:, i])
-        for s, t0 in zip(self.segments, tk[:-1]):
-            sel = (t >= t0) & (t < t0 + s.duration)
-            a[sel] = s.accel
-        return v, a
-
-
-def accelerate_to(speed, accel, direction=(1.0, 0.0, 0.0)):
-    """One :class:`Segment` accelerating at ``accel`` (m/s^2) along ENU ``direction`` until ``speed`` (m/s)."""
-    d = np.asarray(direction, dtype=float)
-    d = d / np.linalg.norm(d)
-    return Segment(tuple(d * accel), speed / accel)
 
 
 # ----------------------------------------------------------------------------------- trajectory

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from fusionbench import attitude, drive, earth, imu, trajectory, units
-from fusionbench.aiding import Aiding, bracket, enu_offset, lever_offset, lever_velocity
+from fusionbench.aiding import Aiding
+from fusionbench.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
 from fusionbench.aidingsim import AidingSpec, simulate_aiding
 from fusionbench.strapdown import NavState, Strapdown
 

@@ -10,7 +10,7 @@ from fusionbench import attitude, bound, earth, metrics, units
 # fusionbench.imu before fusionbench.aidingsim: imported first, aidingsim's imports are circular
 from fusionbench.imu import PRESETS, IMUSpec, NoiseSchedule, SensorErrors
 
-from fusionbench.aiding import lever_offset, lever_velocity  # noqa: I001
+from fusionbench.aiding_geometry import lever_offset, lever_velocity  # noqa: I001
 from fusionbench.aidingsim import AidingSpec
 from fusionbench.aligner import Site
 from fusionbench.drive import car_drive

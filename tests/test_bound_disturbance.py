@@ -9,6 +9,7 @@ from scipy.linalg import expm
 
 from fusionbench import attitude, bound, bound_model, earth, metrics, units
 from fusionbench import trajectory as tj
+from fusionbench.translation import Segment, Translation, VelocityDisturbance
 # fusionbench.imu before fusionbench.aidingsim: imported first, aidingsim's imports are circular
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors
 
@@ -32,7 +33,7 @@ def _truth_runs(runs, T, step, vs, vdt, rms, seed):
     """Simulated step averages of the reference's measured velocity error (runs, M, 2), m/s, and the true
     misalignment at the end (runs, 3), rad, built here from the continuous error model of a fixed base: phi and dv
     from scipy's expm (Van Loan) over fine steps of step/10, the disturbance of each run a
-    :class:`fusionbench.trajectory.VelocityDisturbance` (its own frequencies and phases), its acceleration
+    :class:`fusionbench.translation.VelocityDisturbance` (its own frequencies and phases), its acceleration
     entering the velocity error through the specific force (``[a_d x] phi``, midpoint rule) and its velocity the
     measurement (exact step averages from its displacement); the reference's white noise averaged over the step."""
     rng = np.random.default_rng(seed)
@@ -54,7 +55,7 @@ def _truth_runs(runs, T, step, vs, vdt, rms, seed):
     t_step = np.arange(M + 1) * step
     acc, avg = np.empty((runs, t_mid.size, 3)), np.empty((runs, M, 2))
     for r in range(runs):
-        dist = tj.VelocityDisturbance((rms,) * 3, seed=seed * 10000 + r)
+        dist = VelocityDisturbance((rms,) * 3, seed=seed * 10000 + r)
         acc[r] = dist.evaluate(t_mid)[1]
         disp = dist.evaluate(t_step)[2][:, :2]
         avg[r] = np.diff(disp, axis=0) / step
@@ -139,7 +140,7 @@ def test_a_vanishing_disturbance_gives_the_undisturbed_bound():
 def test_the_band_pass_gives_the_disturbance_its_rms_and_band():
     # the model's stationary velocity variance on each horizontal axis is rms^2, and its spectrum is the
     # Butterworth band-pass's |H|^2 = 1 / (1 + x^(2N)), x = (f^2 - f1 f2) / (f (f2 - f1)), scaled to that variance
-    dist = tj.VelocityDisturbance((0.03, 0.02, 0.5), band=(0.2, 1.5))
+    dist = VelocityDisturbance((0.03, 0.02, 0.5), band=(0.2, 1.5))
     F, Qc, P0, out = bound_model.disturbance_block(dist, np.zeros((1, 5, 5)), np.zeros((1, 5, 5)), np.ones(5),
                                                    ("velocity",))
     V, A, Q = out["velocity"], F[0][5:, 5:], Qc[0][5:, 5:]
@@ -176,8 +177,8 @@ def test_a_receiver_at_rest_does_not_report_the_disturbance_and_one_on_the_move_
         assert s5[-1, 2] == pytest.approx(s0[-1, 2], rel=0.01)
         assert np.all(s5[-1, :2] > 1.05 * s0[-1, :2])
     # on a moving base the receiver measures the true velocity, disturbance included: it is known motion
-    car = tj.Trajectory(LAT, LON, H, translation=tj.Translation(
-        segments=(tj.Segment((0.5, 0.0, 0.0), 20.0),), disturbance=tj.VelocityDisturbance((0.05,) * 3)), duration=60.0)
+    car = tj.Trajectory(LAT, LON, H, translation=Translation(
+        segments=(Segment((0.5, 0.0, 0.0), 20.0),), disturbance=VelocityDisturbance((0.05,) * 3)), duration=60.0)
     assert bound_model.unreported_disturbance(car, AidingSpec(1.0, (0.05,) * 3))[0] is None
     assert bound_model.unreported_disturbance(car, None)[0] is car.translation.disturbance
 
@@ -185,7 +186,7 @@ def test_a_receiver_at_rest_does_not_report_the_disturbance_and_one_on_the_move_
 # ------------------------------------------------------------------------------------------ 4. bad input
 def test_a_disturbance_the_model_cannot_read_is_one_clear_line():
     traj = moored(0.02, 60.0)
-    traj.translation = tj.Translation(disturbance="waves")
+    traj.translation = Translation(disturbance="waves")
     for f in (metrics.attainable_bound, bound.bias_limit):
         with pytest.raises(ValueError, match=r"^trajectory: expected a disturbance with an rms \(3,\) m/s and a band "
                                              r"\(2,\) Hz, found str$"):

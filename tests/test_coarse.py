@@ -5,7 +5,8 @@ import re
 import numpy as np
 import pytest
 
-from fusionbench.coarse import CoarseAligner, InertialCoarseAligner, gravity_integral_inertial
+from fusionbench.coarse import CoarseAligner, InertialCoarseAligner
+from fusionbench.coarse_inertial import gravity_integral_inertial
 from fusionbench import attitude, earth, metrics, motion, trajectory as tj, units
 from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref

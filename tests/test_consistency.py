@@ -18,6 +18,7 @@ from fusionbench.aligner import AlignmentResult, Site
 from fusionbench.consistency import carry, consistency
 from fusionbench.consistency_report import summary_lines, to_json, write_consistency_report
 from fusionbench.imudata import IMUData
+from fusionbench.translation import Translation, VelocityDisturbance
 
 D = units.DEG
 SITE = Site(34 * D, 108 * D, 450.0)
@@ -29,7 +30,7 @@ SWAY = tj.EulerSway(mean=(1 * D, -2 * D, 30 * D), amplitude=(5 * D, 7 * D, 9 * D
 
 def swaying(duration):
     return tj.Trajectory(SITE.lat, SITE.lon, SITE.h, SWAY,
-                         tj.Translation(disturbance=tj.VelocityDisturbance((0.05,) * 3)), duration)
+                         Translation(disturbance=VelocityDisturbance((0.05,) * 3)), duration)
 
 
 def static(duration, mean=(1 * D, -2 * D, 123 * D)):

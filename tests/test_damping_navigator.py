@@ -13,6 +13,7 @@ from damping.navigator import DampedNavigator, q_for_damping
 from fusionbench import earth, imu, metrics, trajectory, units
 from fusionbench.aligner import Navigator, Site
 from fusionbench.imudata import IMUData
+from fusionbench.translation import Translation
 
 
 @pytest.mark.parametrize("q", [1.0, 2.5, 6.5])
@@ -62,7 +63,7 @@ def test_q_changing_every_step_follows_the_time_varying_network():
 
 
 def _static(lat, hours, rate=5.0):
-    traj = trajectory.Trajectory(lat, 0.0, 0.0, trajectory.EulerSway((0.0, 0.0, 0.3)), trajectory.Translation(),
+    traj = trajectory.Trajectory(lat, 0.0, 0.0, trajectory.EulerSway((0.0, 0.0, 0.3)), Translation(),
                                  hours * 3600.0)
     data = imu.simulate(traj, imu.IMUSpec(), 1.0 / rate)
     return traj, data

@@ -16,7 +16,8 @@ from adrc.eso_td_rows import POSITION_SPAN_S, StepRows
 from adrc.moving_base import PAPER_PARAMETERS, ESOTDAligner
 from baselines.kalman import KalmanAligner
 from fusionbench import attitude, units
-from fusionbench.aiding import Aiding, enu_offset
+from fusionbench.aiding import Aiding
+from fusionbench.aiding_geometry import enu_offset
 from fusionbench.aligner import Site
 from fusionbench.claims import supports
 from fusionbench.imu import PRESETS, simulate

@@ -15,7 +15,8 @@ from baselines.graph_aiding import build_problem, path_offsets, recording_rows, 
 from baselines.graph_rows import at_rows, integral_at_rows, mean_at_rows, tile_sums, tiles
 from baselines.graph_support import keyframe_counts
 from fusionbench import attitude, earth, units
-from fusionbench.aiding import Aiding, bracket, enu_offset
+from fusionbench.aiding import Aiding
+from fusionbench.aiding_geometry import bracket, enu_offset
 from fusionbench.aidingsim import AidingSpec, simulate_aiding
 from fusionbench.aligner import Site
 from fusionbench.drive import car_drive

@@ -19,6 +19,7 @@ from fusionbench.aidingsim import simulate_aiding
 from fusionbench.aligner import Site
 from fusionbench.imu import (PRESETS, IMUSpec, NoiseSchedule, SensorErrors, VelocityReferenceSpec, simulate,
                             simulate_vref)
+from fusionbench.translation import Translation, VelocityDisturbance
 
 D = np.pi / 180
 LAT = 34 * D
@@ -139,7 +140,7 @@ def test_a_perfect_imu_on_a_wobbling_vehicle_with_a_perfect_reference_is_aligned
     # within a keyframe interval. Comparing the keyframe velocity with a mean (or a line fit) of the
     # reference over the interval left 20 to 190 arcmin; each sample compared with the velocity the IMU
     # predicts at its own time leaves nothing (the Kalman filter: 0.002 arcmin)
-    trans = tj.Translation(disturbance=tj.VelocityDisturbance((0.5, 0.5, 0.1), (0.1, 2.0)))
+    trans = Translation(disturbance=VelocityDisturbance((0.5, 0.5, 0.1), (0.1, 2.0)))
     tr = tj.Trajectory(LAT, 0.3, 50.0, tj.EulerSway(mean=(1 * D, -1 * D, -60 * D)), trans, duration=120.0)
     data = simulate(tr, IMUSpec(), 0.01)
     vref = tr.truth(data.increments()[0]).v_n

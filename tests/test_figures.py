@@ -7,6 +7,7 @@ from importlib import resources
 import numpy as np
 import pytest
 
+from fusionbench import figure_events as fev
 from fusionbench import figures as fg
 from fusionbench import scenarios, units
 from fusionbench.report import _table, azimuth_figure, error_figure
@@ -64,32 +65,32 @@ def test_events_of_built_in_scenarios_come_from_their_files():
     for name, label in (("static-r-jump", "reference-velocity noise variance x100"),
                         ("static-q-jump", "IMU white-noise PSD x100")):
         jump = _toml(name)["metrics"]["jump_window_s"]
-        ev = fg.scenario_events(scenarios.get(name), 600.0)
+        ev = fev.scenario_events(scenarios.get(name), 600.0)
         assert [(e.t0_s, e.t1_s, e.label) for e in ev] == [(jump[0], jump[1], label)]  # the window once
     raw = _toml("paper004-accel-0.02")
     scn = scenarios.get("paper004-accel-0.02")
     start, dur = raw["motion"]["start_s"], raw["motion"]["segments"][0]["duration_s"]
-    ev = fg.scenario_events(scn, raw["duration_s"])
+    ev = fev.scenario_events(scn, raw["duration_s"])
     assert [(e.t0_s, e.t1_s) for e in ev] == [(start, start + dur)] and ev[0].label.startswith("manoeuvre")
     # the damping switch-in, from the methods (damped-nav's damp_from_s, 3 h), once for the three damped variants
     methods = {n: scn.method(n) for n in raw["methods"]}
-    mev = fg.method_events(methods, init_given=True)
+    mev = fev.method_events(methods, init_given=True)
     assert [(e.t0_s, e.t1_s, e.methods) for e in mev] == [(3 * 3600.0, None, ("fixed", "adaptive", "adaptive-ins"))]
     # a moving base whose motion covers the whole record has no manoeuvre to mark
-    assert fg.scenario_events(scenarios.get("paper001-moving-base"), 500.0) == []
+    assert fev.scenario_events(scenarios.get("paper001-moving-base"), 500.0) == []
     # the platform's roll phases, scaled with the scheme
-    roll = fg.scenario_events(scenarios.get("paper002-rolling"), 5400.0)
+    roll = fev.scenario_events(scenarios.get("paper002-rolling"), 5400.0)
     assert [(e.t0_s, e.t1_s) for e in roll] == [(0, 1800), (1800, 2700), (2700, 4500), (4500, 5400)]
 
 
 def test_a_filter_with_its_own_coarse_stage_marks_the_hand_over_only_when_it_runs():
     scn = scenarios.get("sway-34n")
     kf, eso = scn.method("kf"), scn.method("eso-td")
-    assert fg.method_events({"kf": kf, "eso-td": eso}, init_given=False)[0] == \
-        fg.Event(kf.coarse_s, None, "coarse -> fine hand-over", ("kf", "eso-td"))
-    assert fg.method_events({"kf": kf, "eso-td": eso}, init_given=True) == []
+    assert fev.method_events({"kf": kf, "eso-td": eso}, init_given=False)[0] == \
+        fev.Event(kf.coarse_s, None, "coarse -> fine hand-over", ("kf", "eso-td"))
+    assert fev.method_events({"kf": kf, "eso-td": eso}, init_given=True) == []
     pid = scn.method("pid")
-    assert [e.t0_s for e in fg.method_events({"pid": pid}, True)] == [pid.shot_s, pid.compass_stages[0][0]]
+    assert [e.t0_s for e in fev.method_events({"pid": pid}, True)] == [pid.shot_s, pid.compass_stages[0][0]]
 
 
 def test_no_limit_or_band_for_navigation_and_hours_on_the_axis(tmp_path):

@@ -6,6 +6,7 @@ import pytest
 
 from fusionbench import drive, imu, motion, trajectory
 from fusionbench.aligner import Site, load_method
+from fusionbench.translation import Translation, VelocityDisturbance
 
 D = np.pi / 180
 LAT = 34 * D
@@ -20,7 +21,7 @@ def _record(kind, spec="navigation", duration=300.0):
         "moored": lambda: trajectory.moored(LAT, mean=MEAN, duration=duration, disturbance_rms=0.1),
         "heave": lambda: trajectory.Trajectory(LAT, 0, 0, trajectory.EulerSway(MEAN, (5 * D, 7 * D, 9 * D),
                                                                               (0.5, 0.3, 0.2)),
-                                               trajectory.Translation(disturbance=trajectory.VelocityDisturbance(
+                                               Translation(disturbance=VelocityDisturbance(
                                                    (0.1, 0.1, 0.3), (0.05, 0.3))), duration=duration),
         "car": lambda: drive.car_drive(LAT, heading=0.5, duration=duration),
         "car-waits-60": lambda: drive.car_drive(LAT, heading=0.5, wait=60.0, duration=duration),

@@ -6,6 +6,7 @@ import pytest
 from fusionbench import attitude, earth, trajectory as tj, units
 from fusionbench.imufiles import read_psins
 from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.translation import Segment, Translation
 from tests.conftest import DATA, agree_to_rounding, load_fixture
 
 D = np.pi / 180
@@ -49,7 +50,7 @@ def test_seed000_sway_ten_minutes(record_property):
 
 def test_moving_base_with_turns_and_accelerations_follows_truth():
     sway = tj.EulerSway(mean=(0, 0, 30 * D), amplitude=(1 * D, 1 * D, 1 * D), frequency=(0.1, 0.2, 0.05))
-    motion = tj.Translation(segments=(tj.Segment((0.98, 0, 0), 100.0), tj.Segment((0, 0.5, 0), 100.0)))
+    motion = Translation(segments=(Segment((0.98, 0, 0), 100.0), Segment((0, 0.5, 0), 100.0)))
     tt, out, truth, phi = run_perfect(tj.Trajectory(LAT, LON, H, sway, motion, duration=600.0), 0.01, height_fixed=True)
     assert np.abs(phi).max() < 0.01 * units.ARCSEC
     assert np.abs(out["v_n"][0] - truth.v_n).max() < 1e-4

@@ -39,7 +39,7 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
         PNG file written (atomically, :func:`fusionbench.figures.save_png`).
     groups : sequence of (title, list of names), optional
         Panels; default :data:`FIGURE_GROUPS`.
-    events : sequence of fusionbench.figures.Event, optional
+    events : sequence of fusionbench.figure_events.Event, optional
         Marked on the time axis (e.g. :func:`baselines.rolling.scheme.scheme_events`, the roll phases).
 
     Returns
@@ -48,6 +48,7 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
         The path written.
     """
     from fusionbench import figures as fg  # matplotlib only when a figure is drawn
+    from fusionbench.figure_events import events_note, in_record, mark_events
 
     t = np.asarray(times, dtype=float)
     S = np.asarray(S, dtype=float)
@@ -61,7 +62,7 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
             if m not in names:
                 raise ValueError(f"groups: state {m!r} of panel {title!r} is not in names")
     scale, unit = fg.time_axis(t[-1] if t.size else 0.0)
-    events = fg.in_record(events, t[-1]) if t.size else []
+    events = in_record(events, t[-1]) if t.size else []
     fig, axes = fg.plt.subplots(len(groups), 1, figsize=(8.5, 1.4 + 2.4 * len(groups)), sharex=True, squeeze=False)
     for k, (ax, (title, members)) in enumerate(zip(axes[:, 0], groups)):
         for m in members:
@@ -72,10 +73,10 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
         ax.set_ylabel("output change (ug)\nper prior sigma", fontsize=9)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best", ncol=2)
-        fg.mark_events(ax, events, scale, numbers=k == 0)
+        mark_events(ax, events, scale, numbers=k == 0)
     axes[-1, 0].set_xlabel(f"time ({unit})")
     fg.finish(fig, "Output sensitivity along the rolling scheme (seed 002 Figs. 4-7): the change of an accelerometer "
               "output caused by an initial error of one prior sigma of each coefficient",
-              [fg.events_note(events, scale, unit)])
+              [events_note(events, scale, unit)])
     fg.save_png(fig, str(path))
     return str(path)

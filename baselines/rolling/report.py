@@ -8,6 +8,7 @@ import numpy as np
 
 from fusionbench import figures as fg
 from fusionbench import units
+from fusionbench.figure_events import mark_events
 from fusionbench.figures import plt, save_png
 from fusionbench.imufiles import atomic_open
 from fusionbench.report import paper_section
@@ -44,7 +45,7 @@ def calibration_figure(out, path, names=("D0_X", "DI_X", "DIO_X", "G_XY", "K0_Y"
             ax.set_ylabel(f"{n} ({model.COEFF_CUSTOMARY_UNITS[i]})", fontsize=8)
             ax.grid(alpha=0.3)
             ax.set_ylim(-lim, lim)
-            fg.mark_events(ax, c.events, c.scale, numbers=k < 2)
+            mark_events(ax, c.events, c.scale, numbers=k < 2)
         break
     axes.ravel()[0].legend(fontsize=7, loc="lower right")
     for ax in axes[-1]:
@@ -69,7 +70,7 @@ def attitude_figure(out, path):
         ax.set_ylabel(f"rms over runs of phi{'ENU'[i]} (arcsec)", fontsize=9)
         ax.grid(alpha=0.3, which="both")
         fg.plain_log_ticks(ax)
-        fg.mark_events(ax, c.events, c.scale, numbers=i == 0)
+        mark_events(ax, c.events, c.scale, numbers=i == 0)
     axes[0].legend(fontsize=8)
     axes[-1].set_xlabel(f"time ({c.unit})")
     fg.finish(fig, f"{c.title}: platform attitude error, rms over runs", fg.notes(c))

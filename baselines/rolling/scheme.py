@@ -216,8 +216,8 @@ def commands(scheme, C0, lat):
 
 
 def scheme_events(scheme):
-    """The roll phases of a scheme as unshaded spans (:class:`fusionbench.figures.Event`), named by their axis."""
-    from fusionbench.figures import Event  # matplotlib only when a figure is drawn
+    """The roll phases of a scheme as unshaded spans (:class:`fusionbench.figure_events.Event`), named by their axis."""
+    from fusionbench.figure_events import Event  # only when a figure is drawn
 
     names = {v: k for k, v in AXES.items()}
     ev, t = [], 0.0

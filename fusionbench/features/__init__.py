@@ -66,7 +66,7 @@ class Feature(Protocol):
         """Figures it draws into ``folder``: ``{file name: caption}``."""
 
     def events(self) -> list:
-        """Its spans or instants on the figures' time axis (:class:`fusionbench.figures.Event`)."""
+        """Its spans or instants on the figures' time axis (:class:`fusionbench.figure_events.Event`)."""
 
     def validate(self, duration_s: float, quick: bool, where: str):
         """Raise ValueError (one line naming ``where`` and its field) when it does not fit a record of

@@ -17,7 +17,7 @@ class JumpWindow(FeatureBase):
     """The window ``[start_s, end_s)`` of a noise jump.
 
     Per method in metrics.json, ``jump``: ``window_s``; ``rms_arcmin`` before / during / after (RMS over runs and
-    time, E, N, U); ``peak_arcmin`` (largest |error| from the jump on, over runs); ``reconverge_s`` (statistics
+    time, E, N, U); ``peak_arcmin`` (largest abs(error) from the jump on, over runs); ``reconverge_s`` (statistics
     over runs of the time after the window until phiU stays within the settling band of the limit)."""
 
     start_s: float
@@ -77,6 +77,6 @@ class JumpWindow(FeatureBase):
         return "\n".join(lines) + "\n"
 
     def events(self):
-        from ..figures import Event
+        from ..figure_events import Event
 
         return [Event(self.start_s, self.end_s, "noise-jump window")]

@@ -35,6 +35,7 @@ from ..aidingsim import AidingSpec
 from ..aligner import Site, entry_class
 from ..drive import Drive
 from ..experiment import load_experiment
+from ..translation import Translation
 from .tables import AIDING_KEYS, MAX_SPEED_MPS, MOTION_KEYS, parse_aiding, parse_motion
 
 _TOP = {"name", "description", "kind", "duration_s", "rate_hz", "runs", "methods", "quick", "site", "attitude",
@@ -93,7 +94,7 @@ class Scenario:
     sway_amplitude: tuple
     sway_frequency: tuple
     sway_phase: tuple
-    translation: trajectory.Translation | Drive
+    translation: Translation | Drive
     imu_spec: imu.IMUSpec
     vref_spec: imu.VelocityReferenceSpec
     init_misalignment: tuple | None

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import fields, imu, trajectory
+from .. import fields, imu
 from ..aidingsim import AidingSpec
 from ..drive import Drive, Leg
+from ..translation import Segment, Translation, VelocityDisturbance
 
 _where, _num, _vec = fields.where, fields.number, fields.vector
 #: Largest acceleration of a motion segment per ENU axis, m/s^2 (10 g: beyond any vehicle an alignment runs on).
@@ -25,7 +26,7 @@ AIDING_KEYS = {"rate_hz", "velocity_sigma_mps", "position_sigma_m", "lever_arm_m
 
 
 def parse_motion(mo, src, duration, rate, heading, pitch, roll, swaying):
-    """The translation of ``[motion]``: a :class:`fusionbench.trajectory.Translation` (segments, disturbance), or a
+    """The translation of ``[motion]``: a :class:`fusionbench.translation.Translation` (segments, disturbance), or a
     :class:`fusionbench.drive.Drive` when it has ``legs`` (the vehicle's heading, pitch and roll from
     ``[attitude]``: ``heading``, ``pitch``, ``roll`` rad; a drive refuses a sway, ``swaying`` True)."""
     s = f"{src} [motion]"
@@ -41,7 +42,7 @@ def parse_motion(mo, src, duration, rate, heading, pitch, roll, swaying):
         if not isinstance(it, dict) or set(it) != {"accel_mps2", "duration_s"}:
             raise fields.FieldError(f"{_where(src, f'motion.segments[{i}]')}: expected accel_mps2 and duration_s, "
                                     f"found {it!r}")
-        segs.append(trajectory.Segment(_vec(it, "accel_mps2", s, lo=-MAX_ACCEL_MPS2, hi=MAX_ACCEL_MPS2),
+        segs.append(Segment(_vec(it, "accel_mps2", s, lo=-MAX_ACCEL_MPS2, hi=MAX_ACCEL_MPS2),
                                        _num(it, "duration_s", s, lo=0.0)))
     dist = None
     if "disturbance_rms_mps" in mo:
@@ -49,13 +50,13 @@ def parse_motion(mo, src, duration, rate, heading, pitch, roll, swaying):
         if not 0 < band[0] < band[1] <= rate / 4:
             raise fields.FieldError(f"{_where(src, 'motion.disturbance_band_hz')}: expected 0 < low < high <= "
                                     f"rate_hz/4, found {band}")
-        dist = trajectory.VelocityDisturbance(_vec(mo, "disturbance_rms_mps", s, lo=0.0, hi=MAX_SPEED_MPS), band,
+        dist = VelocityDisturbance(_vec(mo, "disturbance_rms_mps", s, lo=0.0, hi=MAX_SPEED_MPS), band,
                                               seed=int(_num(mo, "disturbance_seed", s, 0.0, 0, 2**31)))
     start = _num(mo, "start_s", s, 0.0, 0.0)
     if start >= duration and segs:
         raise fields.FieldError(f"{_where(src, 'motion.start_s')}: expected a start inside the record (< duration_s "
                                 f"= {duration:g} s), found {start:g}")
-    return trajectory.Translation(segments=tuple(segs), start=start, disturbance=dist)
+    return Translation(segments=tuple(segs), start=start, disturbance=dist)
 
 
 def _drive(mo, src, duration, rate, heading, pitch, roll, swaying):
