@@ -33,7 +33,9 @@ import os
 import numpy as np
 
 from .aiding import MAX_LEVER_ARM_M, Aiding
-from .imufiles import IMUFileError, _cell, _is_number, _lines
+from .aidingnmea import read_nmea_rows
+from .aidingtext import AidingFileError, text_lines
+from .imufiles import _cell, _is_number
 
 __all__ = ["AidingFileError", "FORMATS", "CSV_COLUMNS", "read_aiding", "read_csv_rows", "read_kf_gins_rows",
            "text_lines", "aiding_summary", "kinds", "check_lever_arm", "write_csv"]
@@ -45,20 +47,6 @@ CSV_COLUMNS = ("t", "vE", "vN", "vU", "lat", "lon", "h", "sigma_v", "sigma_p", "
 _CSV_HINT = "expected a header of t and vE,vN[,vU] and/or lat,lon[,h], optional sigma_v, sigma_p, zupt"
 #: KF-GINS GNSS files: 7 columns (position) or 13 (position and velocity).
 KF_GINS_WIDTHS = (7, 13)
-
-
-class AidingFileError(IMUFileError):
-    """A missing, unreadable or malformed aiding file; message ``"<path>: <problem>"`` on one line (an
-    :class:`~fusionbench.imufiles.IMUFileError`, so what catches a bad input file catches it too)."""
-
-
-def text_lines(path):
-    """The non-blank lines of an aiding file not starting with ``#``, as (line number, text); a file that cannot be
-    read is an :class:`AidingFileError`."""
-    try:
-        return _lines(path, "#")
-    except IMUFileError as exc:
-        raise AidingFileError(exc.path, exc.problem) from None
 
 
 def read_aiding(path, fmt="csv", lever_arm=(0.0, 0.0, 0.0), delay=0.0, time_offset=0.0) -> Aiding:
@@ -96,8 +84,6 @@ def read_aiding(path, fmt="csv", lever_arm=(0.0, 0.0, 0.0), delay=0.0, time_offs
     if not np.isfinite(time_offset):
         raise ValueError(f"{path}: time offset: expected a finite number of s, found {time_offset!r}")
     if fmt == "nmea":
-        from .aidingnmea import read_nmea_rows
-
         rows = read_nmea_rows(path)
     else:
         rows = (read_csv_rows if fmt == "csv" else read_kf_gins_rows)(path)

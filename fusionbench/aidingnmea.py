@@ -32,7 +32,7 @@ import numpy as np
 import pynmea2
 
 from . import units
-from .aidingfiles import AidingFileError, text_lines
+from .aidingtext import AidingFileError, text_lines
 from .imufiles import _cell
 
 #: One day, s; a time of day that falls back by more than half of it is the next day.

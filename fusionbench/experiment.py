@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 from . import reportdir
+from .pages import write_page
 
 EXPERIMENTS_GROUP = "fusionbench.experiments"
 
@@ -122,8 +123,6 @@ def write_scenario_report(out, folder):
     experiment (:meth:`Experiment.write_report`), all or nothing (:func:`fusionbench.reportdir.staged`): the
     report is written into a temporary folder beside ``folder`` and replaces it whole when complete. ``folder``
     must be absent, empty or a previous report (else ValueError, one line). Returns the report's path."""
-    from .overview import write_page  # the overview imports this module
-
     folder = Path(folder)
     exp = load_experiment(out.scenario.experiment, f"{out.scenario.name}: experiment")
     with reportdir.staged(folder) as tmp:

@@ -2,7 +2,7 @@
 
 The page holds the scoreboard of every method across every scenario, each cell the figure its scenario is
 about (:func:`headline`), links to every scenario's page (``report.html``, an HTML rendering of its
-``report.md``, written beside it by :func:`write_page`) and the run's provenance. Figures are linked
+``report.md``, written beside it by :func:`fusionbench.pages.write_page`) and the run's provenance. Figures are linked
 relatively, nothing is fetched from a network and the page needs no JavaScript: copy the folder anywhere.
 """
 
@@ -13,29 +13,14 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import markdown
-
 from .experiment import load_experiment
 from .imufiles import atomic_open
+from .pages import page, write_page
 
 #: A cell within this factor of its column's best is drawn good, within POOR_FACTOR fair, beyond it poor.
 GOOD_FACTOR = 1.25
 POOR_FACTOR = 3.0
 
-_CSS = """
-body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:2em auto;max-width:80em;padding:0 1em;
-color:#222;line-height:1.4}
-table{border-collapse:collapse;margin:1em 0;font-size:0.9em}
-th,td{border:1px solid #ccc;padding:0.3em 0.5em;text-align:right;vertical-align:top}
-th{background:#f3f3f3;font-size:0.85em}
-td:first-child,th:first-child{text-align:left;white-space:nowrap}
-.good{background:#d9f0d3}.fair{background:#fdf1c7}.poor{background:#f6d0cc}.none{color:#999}
-.scroll{overflow-x:auto}
-img{max-width:100%}
-.thumb{max-width:28em;border:1px solid #ddd}
-code{background:#f5f5f5;padding:0 0.2em}
-small{color:#555}
-"""
 
 
 @dataclass
@@ -165,26 +150,6 @@ def _first_image(report_md):
     return found.group(1) if found else None
 
 
-def _page(title, body):
-    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{html.escape(title)}</title>\n'
-            f"<style>{_CSS}</style>\n</head>\n<body>\n{body}\n</body>\n</html>\n")
-
-
-def write_page(report_md):
-    """Render a scenario's ``report.md`` as ``report.html`` beside it (same relative figure links); returns its path."""
-    report_md = Path(report_md)
-    text = report_md.read_text(encoding="utf-8")
-    body = markdown.markdown(text, extensions=["tables", "fenced_code"], output_format="html")
-    title = text.splitlines()[0].lstrip("# ").strip() if text else report_md.parent.name
-    nav = '<p><a href="../index.html">overview</a> · <a href="report.md">report.md</a> · ' \
-          '<a href="metrics.json">metrics.json</a></p>\n'
-    path = report_md.with_suffix(".html")
-    with atomic_open(path) as fh:
-        fh.write(_page(title, nav + body))
-    return path
-
-
 def _scoreboard_html(columns):
     methods = _methods(columns)
     head = "".join(f'<th title="{html.escape(c.figure)}"><a href="{html.escape(c.scenario)}/report.html">'
@@ -261,8 +226,7 @@ def write_overview(folder, results, wall_total=None):
         columns.append(_flag_diverged(headline(scn.kind, metrics, getattr(scn, "init_misalignment", None) is not None,
                                                scn.experiment), metrics))
         entries.append((metrics["scenario"], {"description": getattr(scn, "description", ""), **metrics}, report_md))
-        page = Path(report_md).with_suffix(".html")
-        if not page.exists():
+        if not Path(report_md).with_suffix(".html").exists():
             write_page(report_md)
     prov = results[0][1].get("provenance", {}) if results else {}
     body = (f"<h1>fusionbench report</h1>\n<p>{len(columns)} scenarios, {len(_methods(columns))} methods. Each cell is "
@@ -274,7 +238,7 @@ def write_overview(folder, results, wall_total=None):
             f"{_scenario_sections(folder, entries)}\n<h2>Provenance</h2>\n{_provenance_rows(prov, wall_total)}")
     path = folder / "index.html"
     with atomic_open(path) as fh:
-        fh.write(_page("fusionbench report", body))
+        fh.write(page("fusionbench report", body))
     md = ["# fusionbench report", "", "Scoreboard: each cell is the figure its scenario is about. The same as a page: "
           "[index.html](index.html).", "", _scoreboard_md(columns), ""]
     with atomic_open(folder / "index.md") as fh:

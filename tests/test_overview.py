@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from fusionbench import provenance, scenarios
-from fusionbench.overview import GOOD_FACTOR, _flag_diverged, grade, headline, write_overview, write_page
+from fusionbench.overview import GOOD_FACTOR, _flag_diverged, grade, headline, write_overview
+from fusionbench.pages import write_page
 from fusionbench.experiment import write_scenario_report
 from fusionbench.experiment import run_scenario
 
