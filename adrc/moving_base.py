@@ -100,7 +100,7 @@ class ESOTDAligner(AlignerBase):
     feedback_every_s : float
         Interval of the feedback after the first, s.
     feedback_limit_deg : float
-        Runs whose |psi_hat| exceeds this (deg) are not corrected at a feedback instant.
+        Runs whose abs(psi_hat) exceeds this (deg) are not corrected at a feedback instant.
     coarse_s : float
         Without an initial attitude, the inertial-frame coarse alignment runs this long first, s (with the
         aiding valid then, if any: :class:`fusionbench.coarse.InertialCoarseAligner`).

@@ -37,7 +37,7 @@ def fhan(x1, x2, r, h, c=1.0):
     -------
     ndarray
         The acceleration that brings the double integrator x1'' = u, started at (x1, x2), to the
-        origin fastest under |u| <= r in discrete steps h (negative when x1 is positive, at rest).
+        origin fastest under abs(u) <= r in discrete steps h (negative when x1 is positive, at rest).
     """
     return fhan_arithmetic(np.asarray(x1, dtype=float), np.asarray(x2, dtype=float), r, h, c)
 
@@ -57,7 +57,7 @@ def fhan_arithmetic(x1, x2, r, h, c):
 
 
 def fal(e, alpha, delta):
-    """Han's nonlinear gain fal(e, alpha, delta), eq. (10): |e|^alpha sign(e) outside [-delta, delta],
+    """Han's nonlinear gain fal(e, alpha, delta), eq. (10): ``|e|^alpha sign(e)`` outside [-delta, delta],
     the linear e / delta^(1 - alpha) inside (same units as e^alpha)."""
     e = np.asarray(e, dtype=float)
     lin = e / delta ** (1.0 - alpha)
@@ -178,11 +178,11 @@ def fst(x1, x2, v, r, h1):
     ::
 
         d = h1 r,  d0 = h1 d,  e = x1 - v,  y = e + h1 x2
-        g = x2 - sign(y) (d - sqrt(8 r |y| + d^2)) / 2    if |y| >= d0
-        g = x2 + y / h1                                   if |y| <  d0
-        fst = -r sat(g, d),  sat(g, d) = sign(g) if |g| >= d else g / d
+        g = x2 - sign(y) (d - sqrt(8 r abs(y) + d^2)) / 2    if abs(y) >= d0
+        g = x2 + y / h1                                   if abs(y) <  d0
+        fst = -r sat(g, d),  sat(g, d) = sign(g) if abs(g) >= d else g / d
 
-    (the printed formula lost the square root). Inside the linear zone (|y| < h1^2 r, |g| < h1 r)
+    (the printed formula lost the square root). Inside the linear zone (abs(y) < h1^2 r, abs(g) < h1 r)
     fst = -(x1 - v) / h1^2 - 2 x2 / h1.
 
     Parameters

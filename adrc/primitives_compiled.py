@@ -26,7 +26,7 @@ fhan = numba.njit(cache=True)(fhan_arithmetic)
 def fal(e, alpha, delta, lin_div, half_is_sqrt):
     """Han's fal(e, alpha, delta), eq. (10), for one value (:func:`adrc.primitives.fal`).
 
-    ``lin_div`` is ``delta ** (1 - alpha)``; ``half_is_sqrt``: |e| ** 0.5 is a square root (the reference's
+    ``lin_div`` is ``delta ** (1 - alpha)``; ``half_is_sqrt``: abs(e) ** 0.5 is a square root (the reference's
     exponent is a Python float, for which NumPy takes the root) rather than ``pow`` (an array exponent)."""
     a = abs(e)
     if a > delta:

@@ -130,7 +130,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
     supports = Supports(bases=("static", "sway", "moving"), max_abs_lat_deg=80.0, max_bias_ratio=0.15,
                         max_bias_ratio_moving=0.05, aiding=("velocity", "position"), min_aiding_hz=0.1,
                         max_outage_s=140.0)
-    #: Highest |latitude| accepted, deg: the horizontal earth rate W cos(L) that sets the heading vanishes at the poles.
+    #: Highest abs(latitude) accepted, deg: the horizontal earth rate W cos(L) that sets the heading vanishes at the
+    #: poles.
     max_latitude_deg = 89.0
     #: Keys of the per-recording extras that are the same for every recording (kept once).
     _shared_extra = ("adapt_window_t",)

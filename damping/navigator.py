@@ -21,7 +21,7 @@ Schemes (``scheme``):
 * ``undamped``: H = 1 throughout (Schuler-tuned, the oscillations never decay);
 * ``fixed``: undamped until ``damp_from_s`` (3 h in the paper), then q = q_fixed, the paper's
   xi = 0.5 network: q_fixed = 1 + 0.5 / 0.09 = 6.56 from eq. 6 (its pole damping ratio is 0.46);
-* ``adaptive``: as ``fixed``, but each loop's q is min(q_fixed, q_map(|a|)), with q_map the RBF map of
+* ``adaptive``: as ``fixed``, but each loop's q is min(q_fixed, q_map(abs(a))), with q_map the RBF map of
   :mod:`damping.qmap` (clipped to [1, 7], eq. 12) and a that channel's measured horizontal
   acceleration: the change of the INS velocity over a step, low-passed with time constant
   ``accel_tau_s``. The paper's adaptive scheme keeps xi = 0.5 while the acceleration is small (its

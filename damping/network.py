@@ -143,7 +143,7 @@ def paper_fit(q):
 
 
 def peak_attitude_error(accel, xi, ws=WS, g=None):
-    """Largest |attitude error| (rad) from a step of acceleration ``accel`` (m/s^2), eq. 10."""
+    """Largest abs(attitude error) (rad) from a step of acceleration ``accel`` (m/s^2), eq. 10."""
     g = float(earth.gravity(np.radians(35.0))) if g is None else g
     xi = np.asarray(xi, dtype=float)
     t = np.arctan(np.sqrt(1 - xi**2) / xi) / (ws * np.sqrt(1 - xi**2))
@@ -151,7 +151,7 @@ def peak_attitude_error(accel, xi, ws=WS, g=None):
 
 
 def simulated_peak_error(accel, q, ws=WS, hours=3.0):
-    """Largest |attitude error| (rad) of eq. 2 with the actual H(s) for a step of acceleration,
+    """Largest abs(attitude error) (rad) of eq. 2 with the actual H(s) for a step of acceleration,
     by :func:`scipy.signal.lsim` (1 s steps)."""
     if q <= 1.0:  # H = 1: the Schuler-tuned loop has no acceleration error at all (eq. 2)
         return 0.0

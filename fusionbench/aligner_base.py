@@ -65,7 +65,7 @@ class AlignerBase:
     min_duration_s : float
         Shortest record accepted, s (class attribute, or set in ``__init__`` when it depends on the options).
     max_latitude_deg : float
-        Highest |latitude| accepted, deg (90: any). What the method *claims* (``supports.max_abs_lat_deg``, the
+        Highest abs(latitude) accepted, deg (90: any). What the method *claims* (``supports.max_abs_lat_deg``, the
         conditions the conformance matrix runs) may be less: this is where it refuses.
     spec : IMUSpec or None
         The IMU model the method was given (its ``imu`` option); the azimuth observability is checked with it.

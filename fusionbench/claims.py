@@ -84,7 +84,7 @@ class Supports:
         Kinds of base (:data:`BASE_KINDS`); "moving" means a translating base with a velocity reference
         (``vref``). Empty: no condition is claimed (a paper's printed parameters, kept to reproduce it).
     max_abs_lat_deg : float
-        Highest |latitude| claimed, deg (gyrocompassing loses the horizontal earth rate toward the poles).
+        Highest abs(latitude) claimed, deg (gyrocompassing loses the horizontal earth rate toward the poles).
     needs_init : bool
         The method cannot start on its own: it needs an initial attitude (a navigator, not an aligner).
     max_bias_ratio : float

@@ -1,4 +1,4 @@
-"""Monte Carlo on a Dask cluster: ``fusionbench run ... --scheduler ADDRESS`` or ``--cluster local[:N]``.
+"""Monte Carlo on a Dask cluster: ``fusionbench run`` with ``--scheduler ADDRESS`` or ``--cluster local[:N]``.
 
 The runners split a Monte Carlo into batches of runs and hand them to joblib; here joblib's Dask backend
 (``joblib.parallel_config(backend="dask")``) sends those batches to the workers of a ``dask.distributed`` cluster

@@ -27,7 +27,7 @@ from . import earth
 from .attitude import euler_to_dcm
 from .strapdown import NavState, Strapdown
 
-#: Highest |latitude| of the gyrocompass-type aligners, deg (their ``max_latitude_deg``): they lose the compass
+#: Highest abs(latitude) of the gyrocompass-type aligners, deg (their ``max_latitude_deg``): they lose the compass
 #: effect toward the poles (wN = OMEGA_IE cos L -> 0).
 MAX_LATITUDE_DEG = 80.0
 #: Engines of the aligners whose control loop is compiled (their ``engine`` option): the whole loop in numba
@@ -201,7 +201,7 @@ def correct_azimuth(C_bn, alpha_z):
 def level_guess(imu, seconds=1.0):
     """C_bn guess (R, 3, 3) levelled from the mean specific force of the first ``seconds``, yaw 0.
 
-    Pitch = asin(f_y / |f|), roll = atan2(-f_x, f_z) for C_bn = Rz(yaw) Rx(pitch) Ry(roll).
+    Pitch = asin(f_y / norm(f)), roll = atan2(-f_x, f_z) for C_bn = Rz(yaw) Rx(pitch) Ry(roll).
     """
     t, _, dv = imu.increments()
     n = max(1, int(round(seconds / imu.dt)))

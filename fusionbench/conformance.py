@@ -16,7 +16,7 @@ Each cell (method x condition) is scored at the last sample, over the Monte Carl
   (:func:`fusionbench.metrics.attainable_bound`: the noise part an optimal estimator cannot remove). 1 is
   optimal; a small number of runs makes it scatter by about 1/sqrt(2 runs).
 * ``level``: RMS over runs of (final level error - limit), east and north, arcmin.
-* ``settling``: the first time after which |phiU - limit| stays inside the band until the end, against the
+* ``settling``: the first time after which abs(phiU - limit) stays inside the band until the end, against the
   truth (the band is the larger of the file's ``settling_band_arcmin`` and three bounds).
 
 A cell passes when its efficiency is at most the method's threshold (``[conformance.efficiency]``) and both

@@ -67,8 +67,10 @@ def _sensor_chunk(e: SensorErrors, st, u, t, dt, schedules, sensor, rng_white, r
 
 
 def chunk_grid(n_total, dt, chunk_s=600.0):
-    """The chunks of :func:`simulate_chunks`: ``[(first sample k0, samples n), ...]`` for ``n_total`` samples of
-    ``dt`` s in chunks of ``chunk_s`` s; chunk k0 ends its samples at ``k0 dt + (1 .. n) dt`` (s)."""
+    """The chunks of :func:`simulate_chunks`, as pairs (first sample k0, samples n).
+
+    ``n_total`` samples of ``dt`` s in chunks of ``chunk_s`` s; chunk k0 ends its samples at ``(k0 + 1) dt`` to
+    ``(k0 + n) dt`` (s)."""
     per_chunk = max(1, int(round(chunk_s / dt)))
     return [(k0, min(per_chunk, n_total - k0)) for k0 in range(0, n_total, per_chunk)]
 

@@ -13,7 +13,7 @@ import numpy as np
 from .imudata import IMUData
 
 
-#: Largest departure of a given initial attitude from a rotation matrix, |C C^T - I| (max element).
+#: Largest departure of a given initial attitude from a rotation matrix, abs(C C^T - I) (max element).
 ROTATION_TOL = 1e-6
 
 

@@ -39,7 +39,7 @@ def needs_vref(scn, traj) -> bool:
 
 
 class SimulatedStream:
-    """Runs ``first_run .. first_run + runs - 1`` of a scenario as consecutive ``(IMUData, vref)`` chunks.
+    """Runs ``first_run`` to ``first_run + runs - 1`` of a scenario as consecutive ``(IMUData, vref)`` chunks.
 
     Iterating simulates each chunk as it is read (IMUData of kind ``"increment"``, body RFU, rad and m/s; ``vref``
     (runs, n, 3) ENU m/s at its samples, or None); it can be iterated again (the same numbers). The attributes give

@@ -502,11 +502,10 @@ def test_in_page_links_resolve():
     assert targets and not sorted(targets - anchors)
 
 
-def test_contract_and_readme_link_the_page():
+def test_contract_readme_and_site_link_the_page():
     assert "scenarios.md" in (ROOT / "docs" / "contract.md").read_text()
-    readme = (ROOT / "README.md").read_text()
-    section = readme.split("## Scenarios", 1)[1].split("\n## ", 1)[0]
-    assert "docs/scenarios.md" in section
+    assert "](docs/scenarios.md)" in (ROOT / "README.md").read_text()
+    assert "\nscenarios\n" in (ROOT / "docs" / "index.md").read_text()  # in the site's table of contents
 
 
 def test_module_docstring_example_parses():

@@ -14,24 +14,24 @@ method by name through their entry points (pyproject.toml, groups ``fusionbench.
 
 Modules (each imports only modules above it in this list, and :mod:`fusionbench`)
 ----------------------------------------------------------------------------------
-terms : the element formulas (attitude matrix, angle rates, drifts, outputs) in plain arithmetic, one copy
-    for NumPy and numba.
-angles : the attitude angles: C_pn of [phi, theta, psi] and back, the angle rates.
-model : coefficients, their names and units, the error model, the filter's f(x) and h(x).
-scheme : rolling schemes as data, the commanded path, the torque commands, the roll phases as figure events.
-simulator : the compiled RK4 simulator of the platform (the truth).
-protocol : what a calibration method is (:class:`protocol.Calibrator`), what it returns
-    (:class:`protocol.CalibrationResult`), and how one is found by name.
-priors : the prior standard deviations of the 45 states (shared by the filter and the observability analysis).
-kernels : compiled model evaluations of the filter's inner loop.
-jacobians : analytic Jacobians of f and h, in angle and in error-state form.
-observability : information matrix, rank, weakest directions and output sensitivity of a scheme.
-figures : the output sensitivity figure.
-ekf : the method ``rolling-ekf``, seed 002's 45-state EKF (and the linearised passes after it).
-spec : the scenario file's ``[platform]`` table and the per-run draw of the truth.
-montecarlo : the Monte Carlo of a platform-rolling scenario and its metrics.json figures.
-report : report.md and the figures of a run.
-experiment : the ``platform-rolling`` experiment (:class:`fusionbench.experiment.Experiment`).
+- ``terms``: the element formulas (attitude matrix, angle rates, drifts, outputs) in plain arithmetic, one copy for
+  NumPy and numba.
+- ``angles``: the attitude angles: C_pn of [phi, theta, psi] and back, the angle rates.
+- ``model``: coefficients, their names and units, the error model, the filter's f(x) and h(x).
+- ``scheme``: rolling schemes as data, the commanded path, the torque commands, the roll phases as figure events.
+- ``simulator``: the compiled RK4 simulator of the platform (the truth).
+- ``protocol``: what a calibration method is (:class:`protocol.Calibrator`), what it returns
+  (:class:`protocol.CalibrationResult`), and how one is found by name.
+- ``priors``: the prior standard deviations of the 45 states (shared by the filter and the observability analysis).
+- ``kernels``: compiled model evaluations of the filter's inner loop.
+- ``jacobians``: analytic Jacobians of f and h, in angle and in error-state form.
+- ``observability``: information matrix, rank, weakest directions and output sensitivity of a scheme.
+- ``figures``: the output sensitivity figure.
+- ``ekf``: the method ``rolling-ekf``, seed 002's 45-state EKF (and the linearised passes after it).
+- ``spec``: the scenario file's ``[platform]`` table and the per-run draw of the truth.
+- ``montecarlo``: the Monte Carlo of a platform-rolling scenario and its metrics.json figures.
+- ``report``: report.md and the figures of a run.
+- ``experiment``: the ``platform-rolling`` experiment (:class:`fusionbench.experiment.Experiment`).
 
 Frames
 ------
@@ -77,24 +77,24 @@ Euler-angle rates. With ``w = w_np^p`` (rate of p relative to n, in p), from ``C
     psi'   =  w_z - sin theta phi'
 
 Error coefficients (42, order of :data:`model.COEFF_NAMES`)
-------------------------------------------------------
+-----------------------------------------------------------
 Gyro axes (input I, output O, spin S), nominal and cyclic: X gyro (x_p, y_p, z_p), Y gyro
 (y_p, z_p, x_p), Z gyro (z_p, x_p, y_p).
 
-=======  ======================================  =====================  ==============
-index    coefficients                             SI unit                reported in
-=======  ======================================  =====================  ==============
-0-2      gyro bias D0 (X, Y, Z)                   rad/s                  deg/h
-3-11     D_I, D_O, D_S of gyro X, then Y, then Z  rad/s / (m/s^2)        deg/h/g
-12-20    D_IO, D_IS, D_OS of gyro X, Y, Z         rad/s / (m/s^2)^2      deg/h/g^2
-21-26    gyro input-axis angles gxy, gxz, gyx,    rad                    arcsec
+=======  =======================================  =================  ===========
+index    coefficients                             SI unit            reported in
+=======  =======================================  =================  ===========
+0-2      gyro bias D0 (X, Y, Z)                   rad/s              deg/h
+3-11     D_I, D_O, D_S of gyro X, then Y, then Z  rad/s / (m/s^2)    deg/h/g
+12-20    D_IO, D_IS, D_OS of gyro X, Y, Z         rad/s / (m/s^2)^2  deg/h/g^2
+21-26    gyro input-axis angles gxy, gxz, gyx,    rad                arcsec
          gyz, gzx, gzy
-27-29    accelerometer bias K0 (X, Y, Z)          m/s^2                  ug
-30-32    accelerometer scale-factor error K1      1                      ppm
-33-35    accelerometer quadratic term K2          1 / (m/s^2)            ug/g^2
-36-38    accelerometer axis angles ayx, azx, azy  rad                    arcsec
-39-41    torquer scale-factor error KT (X, Y, Z)  1                      ppm
-=======  ======================================  =====================  ==============
+27-29    accelerometer bias K0 (X, Y, Z)          m/s^2              ug
+30-32    accelerometer scale-factor error K1      1                  ppm
+33-35    accelerometer quadratic term K2          1 / (m/s^2)        ug/g^2
+36-38    accelerometer axis angles ayx, azx, azy  rad                arcsec
+39-41    torquer scale-factor error KT (X, Y, Z)  1                  ppm
+=======  =======================================  =================  ===========
 
 ``COEFF_SCALE`` holds the SI value of one reporting unit (g is the unit 9.80665 m/s^2 of
 :mod:`fusionbench.units`): ``coeffs_SI = values_customary * COEFF_SCALE``.

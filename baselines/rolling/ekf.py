@@ -133,7 +133,7 @@ class RollingEKF:
     second_order : float
         Weight of the second-order output term added to R in the first pass, ``g^2 (s_h^2 s_v^2 + s_h^4)``
         (s_h^2, s_v^2 the tilt and azimuth error variances). 3 by default: on three draws of
-        ``paper002-rolling`` (one pass) the largest |error| / sigma of the coefficients was 2.8 with 3
+        ``paper002-rolling`` (one pass) the largest abs(error) / sigma of the coefficients was 2.8 with 3
         against 27 with 1 (overconfident), and 1.3 with 10 at the price of accuracy; 0.1 diverges.
     passes : int or "auto"
         1: the causal EKF alone (what a real-time system can run). 2 (default): then a linearised Kalman

@@ -54,7 +54,7 @@ class PlatformRolling:
 
     def headline(self, metrics):
         """The overview's column (:class:`fusionbench.overview.Column`): the coefficient groups within the paper's
-        claim and the worst |mean error| over its claim (good within 1)."""
+        claim and the worst abs(mean error) over its claim (good within 1)."""
         from fusionbench.overview import Column
 
         col = Column(metrics["scenario"], "calibration", "coefficient groups within the paper's claim; worst |mean "
@@ -71,7 +71,7 @@ class PlatformRolling:
         return col
 
     def check(self, new, ref):
-        """A coefficient group's largest |mean error| may not grow beyond 10 % of the reference (customary units).
+        """A coefficient group's largest abs(mean error) may not grow beyond 10 % of the reference (customary units).
 
         The information rank is not guarded: on a short scheme the singular values decay through the rank
         tolerance without a gap (``--quick`` of paper002-rolling: the 32nd sits at 1e-12.0), so the count is not a

@@ -18,7 +18,7 @@ group maxima); ``limits_arcmin`` are 0 (the coefficients, biases included, are e
 stationary-alignment limits do not apply). Per method, ``coefficients`` holds per coefficient the
 estimation error mean and standard deviation over runs and the mean predicted sigma, in the customary
 unit named beside them (and ``bound``, the information bound of the run's outputs, when the method
-gives one: ``result.bound()``), and ``groups`` the largest |mean error| of each group.
+gives one: ``result.bound()``), and ``groups`` the largest abs(mean error) of each group.
 """
 
 from __future__ import annotations

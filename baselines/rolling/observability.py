@@ -273,7 +273,7 @@ class Directions:
         prior-scaled when M is), in a readable basis: each column has one "pivot" state and no component
         on the other columns' pivots, so a single state the scheme cannot see appears alone.
     terms : list of list of (str, float)
-        Per column, the states with ``|component| >= min_component``, largest first.
+        Per column, the states with ``abs(component) >= min_component``, largest first.
     weights : ndarray, shape (n,)
         Squared norm of each state's projection on the subspace (basis independent): 1 means the state
         lies in it entirely (not separated at all), 0 that it is orthogonal to it.
@@ -320,7 +320,7 @@ def unobservable_directions(M, rtol=RTOL, count=None, names=None, min_component=
     names : list of str, optional
         State names; default :data:`ERROR_STATE_NAMES` (n = 45).
     min_component : float, optional
-        Smallest |component| listed in ``terms``.
+        Smallest abs(component) listed in ``terms``.
 
     Returns
     -------
