@@ -167,13 +167,10 @@ def _method_notes(cls):
 def _check_methods(scns, methods):
     """Load each ``module:Class`` method named on the command line for every scenario before any work, so that
     one that cannot be imported or built is one line naming it (the registered ones are the package's)."""
-    from .experiment import load_experiment
-
     for scn in scns if methods else ():
-        loader, group = getattr(scn, "method", None), load_experiment(scn.experiment).method_group
         for spec in methods:
-            if loader and ":" in spec and spec not in getattr(scn, "variants", {}):
-                named(spec, lambda: loader(spec), group=group)
+            if ":" in spec and spec not in scn.variants:
+                named(spec, lambda: scn.method(spec), group=scn.experiment_type.method_group)
 
 
 def _cmd_run(args):
@@ -187,7 +184,7 @@ def _cmd_run(args):
         names = [args.scenario]
     scns = [scenarios.get(n, overrides) for n in names]  # validate every scenario before running any
     for scn in scns:
-        if getattr(scn, "template", False) and not {"imu", "site"} <= set(overrides):
+        if scn.template and not {"imu", "site"} <= set(overrides):
             raise ValueError(f"scenario {scn.name!r} is a template of your sensor: give --imu FILE.toml (e.g. what "
                              f"`fusionbench identify` writes) and --site LAT,LON,H")
     if args.methods is not None and not args.methods.strip(", "):

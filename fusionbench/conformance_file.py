@@ -7,12 +7,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
+from typing import ClassVar, Mapping
 
 import numpy as np
 
 from . import bound, claims, fields, imu, units
 from .claims import azimuth_bias_ratio
 from .drive import car_legs
+from .experiment import ScenarioBase
 
 #: Bases of a condition: kind claimed (:data:`fusionbench.claims.BASE_KINDS`), sway amplitude (deg) and frequency (Hz)
 #: of [pitch, roll, yaw].
@@ -91,8 +94,13 @@ class Condition:
 
 
 @dataclass(frozen=True)
-class Matrix:
+class Matrix(ScenarioBase):
     """A validated conformance matrix file."""
+
+    #: Its conditions carry their own features and starts (:class:`fusionbench.experiment.ScenarioBase`).
+    features: ClassVar[tuple] = ()
+    variants: ClassVar[Mapping] = MappingProxyType({})
+    init_misalignment: ClassVar[None] = None
 
     name: str
     description: str

@@ -71,6 +71,20 @@ class Drive:
     #: The translation protocol of :class:`fusionbench.translation.Translation`: a drive has no disturbance.
     disturbance = None
 
+    def manoeuvres(self):
+        """The legs that change speed or heading as ``(t0_s, t1_s, label)``, s from the start of the trajectory,
+        labelled with their mean acceleration (m/s^2) and heading rate (deg/s, clockwise positive): the events of a
+        figure's time axis."""
+        out, t = [], self.start
+        for leg in self.legs:
+            side = "right" if leg.turn_rate > 0 else "left"
+            what = ([f"{side} turn {abs(np.degrees(leg.turn_rate)):.3g} deg/s"] if leg.turn_rate else []) + \
+                   ([f"{'accelerate' if leg.accel > 0 else 'brake'} {abs(leg.accel):.3g} m/s^2"] if leg.accel else [])
+            if what and leg.duration > 0:
+                out.append((t, t + leg.duration, ", ".join(what)))
+            t += leg.duration
+        return out
+
     def _table(self):
         """Leg start times (L+1,), speeds (L+1,), headings (L+1,), accelerations (L,), heading rates (L,)."""
         t, s, h = [self.start], [self.speed], [self.heading]

@@ -16,6 +16,7 @@ outcome with ``scenario`` and ``metrics``: the metrics.json mapping) -> :meth:`E
 
 from __future__ import annotations
 
+import functools
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -46,9 +47,9 @@ class Experiment(Protocol):
     method_group: str
 
     def load(self, data: dict, src: str):
-        """Validate a scenario mapping (as read from TOML, ``src`` its file for messages) and build the scenario
-        object: it has at least ``name``, ``description``, ``experiment``, ``kind``, ``methods``, ``source`` and
-        ``sized(quick) -> (duration_s, runs)``. An invalid field raises one line naming the file and field."""
+        """Validate a scenario mapping (as read from TOML, ``src`` its file for messages) and build the scenario: an
+        instance of a :class:`ScenarioBase` subclass with ``sized(quick) -> (duration_s, runs)``. An invalid field
+        raises one line naming the file and field."""
 
     def load_method(self, scn, spec: str, **options):
         """Instantiate one of the experiment's methods for scenario ``scn`` by registered name or ``module:Class``."""
@@ -63,6 +64,41 @@ class Experiment(Protocol):
     def check(self, new: dict, ref: dict) -> list:
         """Regression rows ``(method, figure, reference, new, allowed)`` of the figures this experiment adds to
         metrics.json (the common ones are :func:`fusionbench.check.compare`'s); [] when ``ref`` has none."""
+
+
+class ScenarioBase:
+    """What every experiment's scenario type has: the experiment that runs it, loaded once, and the attributes the
+    core reads on any scenario (a type without one of them declares its neutral value as a class variable).
+    An experiment's :meth:`Experiment.load` returns an instance of its own subclass.
+
+    Attributes
+    ----------
+    name, description, experiment, kind, source : str
+        The scenario's name, its one-line description, the experiment and scenario kind, the file it came from.
+    methods : tuple or None
+        The methods it runs by default.
+    template : bool
+        A template of the user's sensor (needs ``--imu`` and ``--site`` to run).
+    conditions : tuple
+        A matrix's conditions (empty: one condition, the scenario itself).
+    features : tuple
+        Metric features (:mod:`fusionbench.features`).
+    variants : mapping
+        Named method variants of the scenario file, ``{name: options}``.
+    init_misalignment : tuple or None
+        Initial misalignment handed to the methods (deg), or None: each starts on its own.
+    """
+
+    @functools.cached_property
+    def experiment_type(self) -> "Experiment":
+        """The experiment that runs this scenario (its ``experiment`` name resolved once, then kept)."""
+        return load_experiment(self.experiment, f"{self.source or self.name}: experiment")
+
+    def method(self, name):
+        """One of the experiment's methods for this scenario, by registered name or ``module:Class``
+        (:meth:`Experiment.load_method`)."""
+        return self.experiment_type.load_method(self, name)
+
 
 
 def available_experiments():
@@ -112,7 +148,7 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     -------
     The experiment's outcome: ``scenario``, ``metrics`` (the metrics.json mapping) and what its report draws.
     """
-    exp = load_experiment(scn.experiment, f"{scn.source or scn.name}: experiment")
+    exp = scn.experiment_type
     options = {"batch_size": batch_size} if batch_size is not None else {}
     return exp.run(scn, methods=methods, runs=runs, seed=seed, quick=quick, n_jobs=n_jobs, progress=progress,
                    refusals=refusals, **options)
@@ -124,7 +160,7 @@ def write_scenario_report(out, folder):
     report is written into a temporary folder beside ``folder`` and replaces it whole when complete. ``folder``
     must be absent, empty or a previous report (else ValueError, one line). Returns the report's path."""
     folder = Path(folder)
-    exp = load_experiment(out.scenario.experiment, f"{out.scenario.name}: experiment")
+    exp = out.scenario.experiment_type
     with reportdir.staged(folder) as tmp:
         report = Path(exp.write_report(out, tmp))
         write_page(report)

@@ -12,9 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 
-from .experiment import load_experiment
 
 
 @dataclass(frozen=True)
@@ -35,22 +33,17 @@ def scenario_events(scn, duration_s):
     the metrics, the motion segments (a manoeuvre) and the experiment's own (its optional
     ``events(scn, duration_s)``, e.g. the segments of a scheme the experiment runs through)."""
     ev = []
-    for s in getattr(scn.imu_spec, "schedules", ()):
+    for s in scn.imu_spec.schedules:
         who = "IMU" if set(s.sensors) == {"gyro", "accel"} else "+".join(s.sensors)
         ev.append(Event(s.start, s.end, f"{who} white-noise PSD x{s.factor:g}"))
-    for s in getattr(scn.vref_spec, "schedules", ()):
+    for s in scn.vref_spec.schedules:
         ev.append(Event(s.start, s.end, f"reference-velocity noise variance x{s.factor:g}"))
-    for feature in getattr(scn, "features", ()):  # e.g. a jump window, unless a schedule already spans it
+    for feature in scn.features:  # e.g. a jump window, unless a schedule already spans it
         ev += [e for e in feature.events() if not any(o.t0_s == e.t0_s and o.t1_s == e.t1_s for o in ev)]
-    tr = getattr(scn, "translation", None)
-    if tr is not None and tr.segments:
-        t = tr.start
-        for seg in tr.segments:
-            if seg.duration > 0 and not (t <= 0 and t + seg.duration >= duration_s):  # not the whole record
-                a = np.asarray(seg.accel, dtype=float)
-                ev.append(Event(t, t + seg.duration, f"manoeuvre, {np.linalg.norm(a):.3g} m/s^2"))
-            t += seg.duration
-    exp = load_experiment(getattr(scn, "experiment", "alignment"))
+    for t0, t1, label in scn.translation.manoeuvres():  # a manoeuvre, a drive's turn, unless the whole record
+        if not (t0 <= 0 and t1 >= duration_s):
+            ev.append(Event(t0, t1, label))
+    exp = scn.experiment_type
     if hasattr(exp, "events"):  # the experiment's own phases
         ev += exp.events(scn, duration_s)
     return ev

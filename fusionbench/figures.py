@@ -244,7 +244,7 @@ def context(scn, metrics, times, bad=(), labels=None):
             methods[n] = scn.method(n)
         except ValueError:
             continue
-    init_given = getattr(scn, "init_misalignment", None) is not None
+    init_given = scn.init_misalignment is not None
     events = scenario_events(scn, duration) + method_events(methods, init_given)
     scale, unit = time_axis(duration)
     size = f"{metrics['runs']} runs of {duration / scale:g} {unit}{', quick' if metrics.get('quick') else ''}"

@@ -223,9 +223,9 @@ def write_overview(folder, results, wall_total=None):
     folder = Path(folder)
     columns, entries = [], []
     for scn, metrics, report_md in results:
-        columns.append(_flag_diverged(headline(scn.kind, metrics, getattr(scn, "init_misalignment", None) is not None,
+        columns.append(_flag_diverged(headline(scn.kind, metrics, scn.init_misalignment is not None,
                                                scn.experiment), metrics))
-        entries.append((metrics["scenario"], {"description": getattr(scn, "description", ""), **metrics}, report_md))
+        entries.append((metrics["scenario"], {"description": scn.description, **metrics}, report_md))
         if not Path(report_md).with_suffix(".html").exists():
             write_page(report_md)
     prov = results[0][1].get("provenance", {}) if results else {}

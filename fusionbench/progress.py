@@ -47,4 +47,4 @@ def terminal_bar(total, desc, disable):
 def expected_runs(scn, runs=None, quick=False):
     """Runs a scenario will finish (a conformance matrix: runs per condition x conditions)."""
     per = scn.sized(quick)[1] if runs is None else int(runs)
-    return per * len(getattr(scn, "conditions", ())) if getattr(scn, "experiment", "") == "conformance" else per
+    return per * max(len(scn.conditions), 1)

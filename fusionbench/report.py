@@ -155,7 +155,7 @@ def _consistency_section(m):
 def paper_section(out):
     """The ``[paper]`` features' sections of a run (:class:`fusionbench.features.paper.PaperClaims`): the source
     paper's claims beside ours; "" when the scenario has none."""
-    return "".join(f.markdown(out) for f in getattr(out.scenario, "features", ()) if f.table == "paper")
+    return "".join(f.markdown(out) for f in out.scenario.features if f.table == "paper")
 
 
 def _settling(r, runs):

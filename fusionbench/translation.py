@@ -84,6 +84,17 @@ class Translation:
             t.append(t[-1] + s.duration)
         return np.array(t), np.array(v)
 
+    def manoeuvres(self):
+        """The segments as ``(t0_s, t1_s, label)``, s from the start of the trajectory (those of zero length left
+        out), each labelled with its acceleration (m/s^2): the events of a figure's time axis."""
+        out, t = [], self.start
+        for seg in self.segments:
+            if seg.duration > 0:
+                a = float(np.linalg.norm(np.asarray(seg.accel, dtype=float)))
+                out.append((t, t + seg.duration, f"manoeuvre, {a:.3g} m/s^2"))
+            t += seg.duration
+        return out
+
     def is_static(self):
         return not self.segments and not np.any(self.v0)
 

@@ -83,6 +83,21 @@ def test_events_of_built_in_scenarios_come_from_their_files():
     assert [(e.t0_s, e.t1_s) for e in roll] == [(0, 1800), (1800, 2700), (2700, 4500), (4500, 5400)]
 
 
+def test_a_drive_marks_its_turns_and_accelerations_at_their_times():
+    """A user's drive (legs from start_s) is marked leg by leg where it changes speed or heading: the events are
+    the legs' own times (a leg shifted by one sample moves them), straight legs at constant speed are not marked.
+    A drive has no segments: its report used to stop on an AttributeError."""
+    data = {"name": "my-drive", "duration_s": 120.0, "rate_hz": 50.0, "runs": 1, "methods": ["kf"],
+            "site": {"lat_deg": 45.0}, "attitude": {"heading_deg": 30.0},
+            "motion": {"start_s": 4.0, "legs": [{"duration_s": 20.0, "accel_mps2": 0.5}, {"duration_s": 30.0},
+                                                {"duration_s": 8.0, "turn_rate_dps": -5.0},
+                                                {"duration_s": 2.0, "accel_mps2": -1.0}]},
+            "aiding": {"rate_hz": 10.0, "velocity_sigma_mps": 0.05}}
+    ev = fev.scenario_events(scenarios.parse(data, "my-drive.toml"), 120.0)
+    assert [(e.t0_s, e.t1_s, e.label) for e in ev] == [
+        (4.0, 24.0, "accelerate 0.5 m/s^2"), (54.0, 62.0, "left turn 5 deg/s"), (62.0, 64.0, "brake 1 m/s^2")]
+
+
 def test_a_filter_with_its_own_coarse_stage_marks_the_hand_over_only_when_it_runs():
     scn = scenarios.get("sway-34n")
     kf, eso = scn.method("kf"), scn.method("eso-td")

@@ -166,3 +166,20 @@ def test_an_unregistered_experiment_is_one_line_naming_the_registered_ones(tmp_p
         scenarios.load(p)
     msg = str(exc.value)
     assert "\n" not in msg and "experiment" in msg and "'alignment'" in msg and "'repeated'" in msg
+
+
+def test_every_scenario_type_has_the_common_attributes_and_resolves_its_experiment_once():
+    """A scenario (Scenario) and a matrix (Matrix) answer the attributes the core reads on any scenario, and the
+    experiment named in the file is loaded once per scenario (the same object on every use)."""
+    from fusionbench.conformance import ConformanceExperiment
+
+    for name, exp_type, conditions in (("static-r-jump", AlignmentExperiment, 0),
+                                       ("conformance", ConformanceExperiment, 28)):
+        scn = scenarios.get(name)
+        assert isinstance(scn, experiment.ScenarioBase) and scn.template is False
+        assert len(scn.conditions) == conditions and isinstance(scn.experiment_type, exp_type)
+        assert scn.experiment_type is scn.experiment_type
+    matrix = scenarios.get("conformance")
+    assert matrix.features == () and dict(matrix.variants) == {} and matrix.init_misalignment is None
+    assert type(matrix.method("kf")).__name__ == "KalmanAligner"  # through the matrix's own experiment
+    assert scenarios.get("twin", {"imu": "tactical", "site": {"lat_deg": 34.0}}).template is True

@@ -27,6 +27,7 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from .. import attitude, bound, features, fields, imu, trajectory
 from ..aidingsim import AidingSpec
 from ..aligner import Site, entry_class
 from ..drive import Drive
-from ..experiment import load_experiment
+from ..experiment import ScenarioBase, load_experiment
 from ..translation import Translation
 from .tables import AIDING_KEYS, MAX_SPEED_MPS, MOTION_KEYS, parse_aiding, parse_motion
 
@@ -78,8 +79,12 @@ ScenarioError = fields.FieldError
 
 
 @dataclass(frozen=True)
-class Scenario:
+class Scenario(ScenarioBase):
     """A validated scenario. Build its parts with the methods below (all SI)."""
+
+    #: One condition, and never a template (:class:`fusionbench.experiment.ScenarioBase`).
+    template: ClassVar[bool] = False
+    conditions: ClassVar[tuple] = ()
 
     name: str
     description: str
@@ -161,7 +166,7 @@ class Scenario:
         """Instantiate a method by scenario variant name, registered name or ``module:Class`` path, through the
         scenario's experiment (:meth:`fusionbench.experiment.Experiment.load_method`: an aligner gets the
         scenario's IMU spec and velocity-reference noise when it takes them, unless the variant sets them)."""
-        exp = load_experiment(self.experiment)
+        exp = self.experiment_type
         if name not in self.variants:
             return exp.load_method(self, name)
         options = dict(self.variants[name])
