@@ -388,8 +388,8 @@ def test_noise_jump_example_is_what_the_page_says(tmp_path):
 
 def test_platform_example_is_what_the_page_says(tmp_path):
     scn = _load(tmp_path, "my-rolling")
-    assert sum(s.duration for s in scn.setup["platform"].scheme.segments) == scn.duration_s
-    quick = scn.setup["platform"].scaled(scn.sized(True)[0])
+    assert sum(s.duration for s in scn.platform.scheme.segments) == scn.duration_s
+    quick = scn.platform.scaled(scn.sized(True)[0])
     assert sum(s.duration for s in quick.scheme.segments) == 600.0
     assert quick.readout_s == 60.0  # capped at a tenth of the quick duration
 

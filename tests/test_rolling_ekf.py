@@ -110,8 +110,8 @@ def test_noise_free_paper_run_recovers_every_coefficient_within_one_percent():
     from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
-    c, a = draw_truth(scn.setup["platform"], 0, 0)
-    run = simulate(scn.setup["platform"].scheme, c, angles.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
+    c, a = draw_truth(scn.platform, 0, 0)
+    run = simulate(scn.platform.scheme, c, angles.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(passes=2).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     est = res.final()
     assert np.all(np.abs(est[:model.N_COEFFS] - c) < 0.01 * np.abs(c))
@@ -200,7 +200,7 @@ def test_second_pass_reaches_the_information_bound():
     from baselines.rolling.observability import information_matrix
 
     scn = scenarios.get("paper002-rolling")
-    spec = scn.setup["platform"].scaled(1800.0)
+    spec = scn.platform.scaled(1800.0)
     c, a = draw_truth(spec, 0, 0)
     run = simulate(spec.scheme, c, angles.angles_to_dcm(a), scn.site.lat, 0.0, 0.0, 0.0)
     res = R.RollingEKF(gyro_noise=0.0).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
@@ -223,9 +223,9 @@ def test_auto_passes_iterate_until_the_linearisation_point_is_the_answer():
     from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
-    c, a = draw_truth(scn.setup["platform"], 0, 2)
+    c, a = draw_truth(scn.platform, 0, 2)
     a[1] = np.radians(10.0)
-    run = simulate(scn.setup["platform"].scheme, c, angles.angles_to_dcm(a), scn.site.lat, seed=12)
+    run = simulate(scn.platform.scheme, c, angles.angles_to_dcm(a), scn.site.lat, seed=12)
     two = R.RollingEKF().calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     auto = R.RollingEKF(passes="auto").calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
     z = lambda res: np.max(np.abs(res.final()[:model.N_COEFFS] - c) / res.sigma[-1, :model.N_COEFFS])  # noqa: E731
@@ -245,10 +245,10 @@ def test_numpy_engine_matches_filterpy():
     from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
-    base = scn.setup["platform"].scheme
+    base = scn.platform.scheme
     scheme = Scheme(tuple(Segment(s.axis, s.rate, s.duration / 12) for s in base.segments),
                     command_period_s=base.command_period_s, sample_s=base.sample_s, filter_s=base.filter_s)
-    c, a = draw_truth(scn.setup["platform"], 0, 0)
+    c, a = draw_truth(scn.platform, 0, 0)
     run = simulate(scheme, c, angles.angles_to_dcm(a), scn.site.lat, seed=3)
     ref, new = (R.RollingEKF(engine=e).calibrate(run.t, run.y[0], run.w_cmd[0], scn.site.lat)
                 for e in ("filterpy", "numpy"))

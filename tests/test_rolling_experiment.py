@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from baselines.rolling import model
-from baselines.rolling.spec import draw_truth
+from baselines.rolling.experiment import RollingScenario
+from baselines.rolling.spec import PlatformSpec, draw_truth
 from fusionbench import scenarios
 from fusionbench.check import compare
 from fusionbench.experiment import write_scenario_report
@@ -39,16 +40,19 @@ def _load(tmp_path, text=TOML):
 def test_paper_scenario_loads_with_the_papers_scheme():
     scn = scenarios.get("paper002-rolling")
     assert scn.experiment == "platform-rolling"
-    segs = scn.setup["platform"].scheme.segments
+    # its experiment's own type, the [platform] table as a field, not a dict entry to look up
+    assert isinstance(scn, RollingScenario) and isinstance(scn.platform, PlatformSpec) and "platform" not in scn.setup
+    assert scn.experiment_type.name == "platform-rolling"
+    segs = scn.platform.scheme.segments
     assert [s.duration for s in segs] == [1800.0, 900.0, 1800.0, 900.0]
     assert segs[0].axis == (0.0, -1.0, 0.0) and segs[1].axis == (1.0, 0.0, 0.0)
     assert segs[0].rate == pytest.approx(np.radians(0.1))
-    quick = scn.setup["platform"].scaled(900.0)
+    quick = scn.platform.scaled(900.0)
     assert sum(s.duration for s in quick.scheme.segments) == pytest.approx(900.0)
 
 
 def test_truth_depends_on_seed_and_run_only(tmp_path):
-    spec = _load(tmp_path).setup["platform"]
+    spec = _load(tmp_path).platform
     c0, a0 = draw_truth(spec, 5, 1)
     c1, a1 = draw_truth(spec, 5, 1)
     assert np.array_equal(c0, c1) and np.array_equal(a0, a1)

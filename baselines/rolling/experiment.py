@@ -6,13 +6,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from fusionbench import scenarios
 from fusionbench.check import REL_TOL
 
 from .montecarlo import run_calibration
 from .protocol import CALIBRATORS_GROUP, load_calibrator
 from .scheme import scheme_events
-from .spec import parse_platform
+from .spec import PlatformSpec, parse_platform
 
 
 def _platform_table(d, src, duration):
@@ -24,6 +26,14 @@ def _platform_table(d, src, duration):
     return spec
 
 
+@dataclasses.dataclass(frozen=True)
+class RollingScenario(scenarios.Scenario):
+    """A platform-rolling scenario: a :class:`fusionbench.scenarios.Scenario` (site, IMU, runs, durations) and its
+    ``[platform]`` table, the rolling scheme and the error coefficients drawn per run (:class:`PlatformSpec`, SI)."""
+
+    platform: PlatformSpec | None = None
+
+
 class PlatformRolling:
     """Seed 002's platform self-calibration (``experiment = "platform-rolling"``) as an
     :class:`fusionbench.experiment.Experiment`: a ``[platform]`` table, methods from ``fusionbench.calibrators``."""
@@ -31,11 +41,15 @@ class PlatformRolling:
     name = "platform-rolling"
     kind = "calibration"
     method_group = CALIBRATORS_GROUP
-    #: Its own top-level table of the scenario file and the parser of it (the scenario's ``setup["platform"]``).
+    #: Its own top-level table of the scenario file and the parser of it (:attr:`RollingScenario.platform`).
     tables = {"platform": _platform_table}
 
-    def load(self, data, src):
-        return scenarios.parse(data, src, tables=self.tables)
+    def load(self, data, src) -> RollingScenario:
+        """The scenario file's mapping ``data`` (from ``src``) as a :class:`RollingScenario`."""
+        scn = scenarios.parse(data, src, tables=self.tables)
+        fields = {f.name: getattr(scn, f.name) for f in dataclasses.fields(scn)}
+        setup = dict(scn.setup)
+        return RollingScenario(**{**fields, "setup": setup}, platform=setup.pop("platform"))
 
     def load_method(self, scn, spec, **options):
         return load_calibrator(spec, **options)
@@ -50,7 +64,7 @@ class PlatformRolling:
 
     def events(self, scn, duration_s):
         """The roll phases of the scheme (scaled to ``duration_s``) as unshaded spans."""
-        return scheme_events(scn.setup["platform"].scaled(duration_s).scheme)
+        return scheme_events(scn.platform.scaled(duration_s).scheme)
 
     def headline(self, metrics):
         """The overview's column (:class:`fusionbench.overview.Column`): the coefficient groups within the paper's

@@ -102,7 +102,7 @@ def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1,
     runs = default_runs if runs is None else int(runs)
     if runs < 1:
         raise ValueError(f"runs: expected a positive number of Monte Carlo runs, found {runs}")
-    spec = scn.setup["platform"].scaled(duration)
+    spec = scn.platform.scaled(duration)
     if n_jobs == 1 or runs == 1:
         done = (_one_run(scn, spec, methods, k, seed) for k in range(runs))
     else:  # in run order whatever the worker that finished first

@@ -88,7 +88,7 @@ def write_report(out, folder):
     for name in out.outcomes:
         method = scn.method(name)
         if hasattr(method, "report_figures"):
-            for fname, cap in method.report_figures(folder, scn.setup["platform"].scaled(m["duration_s"]).scheme, scn.site.lat):
+            for fname, cap in method.report_figures(folder, scn.platform.scaled(m["duration_s"]).scheme, scn.site.lat):
                 extra.setdefault(fname, cap)
     rows = []
     for name, r in m["methods"].items():
