@@ -1,15 +1,16 @@
 """The estimator of the ESO/TD aligner (:class:`adrc.moving_base.ESOTDAligner`, seed 001: Zhao, Zhuang and Yang,
-Control and Decision 22(2), 2007): one step of the level ESO (eqs. 5-6), the level angles (eqs. 7, 9), eq. 12's
-azimuth through the least-squares or fst TD, the velocity reset at rows and the attitude feedback with the shifts
-that keep every observer continuous. Frames: n = ENU, b = RFU; psi = [psiE, psiN, psiU] rad is the strapdown's
-misalignment. The equations, their derivations and the measured design choices are in ``docs/methods/eso-td.md``.
+Control and Decision 22(2), 2007): the states of the level ESO (eqs. 5-6), of eq. 12's least-squares or fst TD and
+of their copies, the clock of the rows, and the attitude feedback with the shifts that keep every observer
+continuous. The steps themselves (the ESO, the level angles of eqs. 7 and 9, eq. 12's azimuth, the velocity reset at
+rows) are the compiled loop's (:mod:`adrc.moving_base_compiled`; its NumPy oracle is ``tests/oracles/eso_td.py``),
+on this object's arrays. Frames: n = ENU, b = RFU; psi = [psiE, psiN, psiU] rad is the strapdown's misalignment. The
+equations, their derivations and the measured design choices are in ``docs/methods/eso-td.md``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth
 from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
 
 from .ls_differentiator import LeastSquaresDifferentiator
@@ -34,10 +35,11 @@ class ESOTDEstimator:
     """The estimator of :class:`ESOTDAligner` over R runs, stepped once per ESO/TD step (the names and equations of
     ``docs/methods/eso-td.md``).
 
-    :meth:`step` takes one step's strapdown output and the rows valid in it and returns the estimate ``psi`` of the
-    strapdown's misalignment (eqs. 6, 7, 9, 12); :meth:`reset_velocity` resets the velocity at rows;
-    :meth:`feedback` turns the strapdown by the estimate and moves every observer to where it would be had the
-    strapdown always carried the corrected error ("Velocity reset and attitude feedback").
+    The compiled loop (:func:`adrc.moving_base_compiled.run_compiled`) steps its states in place: from one step's
+    strapdown output and the rows valid in it, the estimate ``psi`` of the strapdown's misalignment (eqs. 6, 7, 9,
+    12) and the velocity reset at rows. :meth:`feedback` turns the strapdown by the estimate and moves every observer
+    to where it would be had the strapdown always carried the corrected error ("Velocity reset and attitude
+    feedback").
 
     Parameters
     ----------
@@ -68,8 +70,6 @@ class ESOTDEstimator:
     eso_f, eso_q, eso_x : SecondOrderESO
         td="ls": copies of the ESO's filter on the specific force, on a unit quadratic (its exact ramp lag) and
         on the regressor X.
-    y : ndarray, shape (R, 2)
-        The unreset level velocity error fed to the ESO at the last step (NaN without rows), m/s.
     clock, times : ndarray
         Rows read so far, the first step with rows and the last (int); those steps' row time offsets (samples) and
         the last one's spread (s^2) (:class:`adrc.eso_td_rows.StepRows`).
@@ -92,7 +92,6 @@ class ESOTDEstimator:
             self.td_ls = LeastSquaresDifferentiator((R,), forget)
             self.td_p = LeastSquaresDifferentiator((R,), forget)   # p against time: psiN's drift (-epsN), for its lag
             self.X_int, self.Xb_int, self.M_int = np.zeros(R), np.zeros(R), np.zeros(R)  # int of den0's parts and of m
-            self.den0_prev = self.m_prev = None
             self.td_from = rows.first_step + max(0, int(np.ceil(aligner.td_start_s / h - 1e-9)))  # from the 1st row
             self.td_ready = self.td_from + int(np.ceil(aligner.td_min_s / h - 1e-9))
         self.td_f = FSTTrackingDifferentiator((R, 3), h, aligner.td_r, aligner.force_h1)  # f_n' (s', feedback shifts)
@@ -110,139 +109,13 @@ class ESOTDEstimator:
                         else rows.first_step + max(0, int(np.ceil(aligner.feedback_from_s / h - 1 - 1e-9))))
         self.fb_every = max(1, int(round(aligner.feedback_every_s / h)))
         self.reset_sum, self.psi_fb, self.F_int = np.zeros((R, 2)), np.zeros((R, 3)), np.zeros((R, 3))  # F: int f_n dt
-        self.v_prev, self.e_last = rows.v0[:, :2].copy(), None  # the level velocity at the step's start; the reset
+        self.v_prev = rows.v0[:, :2].copy()  # the level velocity at the step's start
         self.P, self.marks = np.zeros((R, 5)), np.zeros((R, rows.mark_k.size, 8))  # position intervals' integrals
         self.clock, self.times = np.zeros(3, np.int64), np.zeros(3)
 
     def q_time(self, j, offset):
         """Time (s) of rows ``offset`` samples from step ``j``'s mean sample end, from the first rows' mean time."""
         return (j - self.clock[1]) * self.h + (offset - self.times[0]) * self.dt
-
-    def _correct(self, obs, y):
-        """One step of the observer ``obs`` (a :class:`SecondOrderESO`): with the rows' measurement ``y``, its gains
-        applied ``n`` times over; None (no rows): the prediction alone."""
-        if y is None:
-            obs.z1 = obs.z1 + self.h * obs.z2
-            return
-        b1, b2 = obs.beta1, obs.beta2
-        obs.beta1, obs.beta2 = b1 * self.n, b2 * self.n
-        obs.update(y)
-        obs.beta1, obs.beta2 = b1, b2
-
-    def step(self, j, C_bn, v_n, dth, dv, st):
-        """Step ``j`` from the strapdown's attitude ``C_bn`` (R, m, 3, 3) and velocity ``v_n`` (R, m, 3) after
-        each of the step's samples, the samples' increments ``dth``, ``dv`` (R, m, 3, body: rad, m/s), the strapdown's
-        state ``st`` at the step's end and the rows valid in the step; returns psi (R, 3), rad (0 before any row)."""
-        a, h, dt, R = self.a, self.h, self.dt, self.R
-        eso, clock, times = self.eso, self.clock, self.times
-        f_n = np.einsum("rkij,rkj->ri", C_bn, dv) / h  # specific force, ENU, m/s^2
-        lat = st.lat
-        rm, rn = earth.radii(lat)
-        sl, cl = np.sin(lat), np.cos(lat)
-        lon_rate = st.v_n[:, 0] / ((rn + st.h) * cl)
-        lat_rate = st.v_n[:, 1] / (rm + st.h)
-        W = earth.OMEGA_IE + lon_rate
-        cor = (2.0 * earth.OMEGA_IE + lon_rate) * sl     # Coriolis coefficient of eqs. 4, 7, 9
-        df_k = np.einsum("rkij,rkj->rki", C_bn, dv)
-        meas = self.rows.measure(j, C_bn, v_n, dth, df_k, self.v_prev, self.reset_sum, self.F_int, self.P,
-                                 self.marks, np.stack([-lat_rate, W * cl, W * sl], axis=-1))  # omega_in^n
-        self.F_int = self.F_int + df_k.sum(axis=1)
-        y, F_bar, e_last, age = (None, None, None, None) if meas is None else meas
-        self.y = np.full((R, 2), np.nan) if y is None else y  # unreset level velocity error, m/s
-        if y is None and clock[0] == 0:  # no row yet: nothing to estimate
-            return np.zeros((R, 3))
-        first = clock[0] == 0
-        if y is not None:
-            if first:
-                eso.reset(y)
-                clock[1], times[0] = j, self.rows.offset[j]
-            clock[2], times[1], times[2] = j, self.rows.offset[j], self.rows.tau2[j]
-            if a.eso_start == "ls":  # the least-squares line through the rows so far, down to the floor
-                b1, b2 = expanding_memory_gains(clock[0], h, self.n)
-                eso.beta1, eso.beta2 = np.maximum(b1, self.b1_floor), np.maximum(b2, self.b2_floor)
-            clock[0] += 1
-        self._correct(eso, y)                             # eq. 6, both channels
-        self.e_last = None if y is None else e_last + eso.z2 * age  # the reset: the last row's error, now
-        z1, z2 = eso.z1, eso.z2
-        fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
-        if a.td == "ls":
-            eso_f, eso_q = self.eso_f, self.eso_q
-            # int f_n dt at the rows' times, as y is the velocity there
-            if first:
-                eso_f.reset(F_bar, f_n)
-            if a.eso_start == "ls" and y is not None:
-                eso_f.beta1, eso_f.beta2 = np.maximum(b1, self.eso_f_b1), np.maximum(b2, self.eso_f_b2)
-            self._correct(eso_f, F_bar)
-            f_n = eso_f.z2                                # G f_n: the specific force as z2 sees it
-            c = self.q_time(j, times[1])
-            if first:
-                eso_q.reset((c * c + times[2]) / 2.0)
-            if a.eso_start == "ls":
-                eso_q.beta1, eso_q.beta2 = eso.beta1, eso.beta2
-                self.eso_x.beta1, self.eso_x.beta2 = eso.beta1[1], eso.beta2[1]
-            self._correct(eso_q, None if y is None else (c * c + times[2]) / 2.0)
-            fE, fN, fU = f_n[:, 0], f_n[:, 1], f_n[:, 2]
-        dv_hat = z1 - self.reset_sum                           # current strapdown velocity error
-        p = -(z2[:, 0] - cor * dv_hat[:, 1]) / fU         # eq. 7 without the fN psiU term
-        q = (z2[:, 1] + cor * dv_hat[:, 0]) / fU          # eq. 9 without the fE psiU term
-        s, n = fE / fU, fN / fU
-        if first:
-            self.td_f.reset(f_n)
-        _, df = self.td_f.update(f_n)
-        if a.td == "fst":
-            if first:
-                self.td_q.reset(q)
-            _, dq = self.td_q.update(q)                        # eq. 15
-            ds = df[:, 0] / fU - fE * df[:, 2] / fU**2    # s' = (fE / fU)'
-            # eqs. 7, 9, 12 solved together (docs/methods/eso-td.md)
-            den = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate + ds
-            psiU = (W * sl * p - dq - s * (W * cl * q + lat_rate * p)) / den
-        else:
-            # eq. 12 integrated: Y = q - int m = a - psiU X with X = int den (docs/methods/eso-td.md); X from
-            # the raw specific force, then through the ESO's filter like q (the lag q carries)
-            den0 = W * cl * (1.0 + s * s) - W * sl * n + s * n * lat_rate
-            m_known = W * sl * p - s * (W * cl * q + lat_rate * p)
-            # den0 = W cosL + (the terms in s, n): those come through the ESO's filter already (s, n are
-            # G f ratios), W cosL does not and goes through a copy of the ESO (eso_x)
-            den_a, den_b = W * cl, den0 - W * cl
-            if self.den0_prev is not None:
-                self.X_int += 0.5 * h * (den_a + self.den0_prev[0])
-                self.Xb_int += 0.5 * h * (den_b + self.den0_prev[1])
-                self.M_int += 0.5 * h * (m_known + self.m_prev)
-            self.den0_prev, self.m_prev = (den_a, den_b), m_known
-            self.XX_int += self.X_int * h
-            if first:
-                self.eso_x.reset(self.XX_int, self.X_int)
-            self._correct(self.eso_x, None if y is None else self.XX_int)
-            # int s' dt = s - s(0), with s = G fE / G fU already through the ESO's filter
-            X = self.X = self.eso_x.z2 + self.Xb_int + s - self.s_jumps
-            if j >= self.td_from and y is not None:  # a prediction adds nothing to the fits
-                self.td_ls.add(X, q - self.M_int)
-                self.td_p.add(np.broadcast_to(self.eso_q.z2[0], (R,)), p)
-            fitted = j >= self.td_ready and self.td_ls.origin is not None
-            psiU = -self.td_ls.fit(X)[1] if fitted else np.zeros(R)
-        psiE = q + s * psiU
-        if a.td == "ls" and fitted:
-            # q + s psiU is psiE through the ESO's filter, which lags a ramp by beta1 / beta2 (less the
-            # step's own delay, plus the time since the last rows): add the ramp the fit gives, psiE' = m - psiU den0
-            late = (j - clock[2]) * h - times[1] * dt
-            lag = eso.beta1[1] / eso.beta2[1] - h - dt / 2.0 + late
-            psiE = psiE + lag * (m_known - psiU * den0)
-            lagN = eso.beta1[0] / eso.beta2[0] - h - dt / 2.0 + late
-            psiN = p + n * psiU + lagN * self.td_p.fit(self.eso_q.z2[0])[1]  # p's drift (mostly -epsN), the same lag
-        else:
-            psiN = p + n * psiU
-        # what the feedback needs of this step
-        self._now = f_n, df, W, sl, cl, lat_rate, cor, s
-        return np.stack([psiE, psiN, psiU], axis=-1)
-
-    def reset_velocity(self, st):
-        """After a step with rows: the strapdown's level velocity ``st.v_n`` less the last row's error (the reset,
-        kept in ``reset_sum``); and the velocity the next step starts from."""
-        if self.e_last is not None:
-            st.v_n[:, :2] -= self.e_last
-            self.reset_sum += self.e_last
-        self.v_prev = st.v_n[:, :2].copy()
 
     def feedback_due(self, j):
         """Whether the attitude is fed back after step ``j`` (``feedback_from_s``, ``feedback_every_s``; not before

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusionbench.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity, rate_at
+from fusionbench.aiding_geometry import bracket, enu_offset
 
 #: Kinds of measurement: a velocity (or at-rest) row at one time; the mean over a position interval.
 POINT, INTERVAL = 0, 1
@@ -64,7 +64,8 @@ class StepRows:
     """The measurements of each ESO step, built from an :class:`~fusionbench.aiding.Aiding` (:meth:`build`).
 
     Measurements are sorted by the step they belong to: those of step j are ``start[j]:start[j + 1]``. Arrays of
-    int are int64 (the compiled kernel reads them as they are).
+    int are int64 (the compiled kernel reads them as they are: :func:`adrc.eso_td_rows_compiled.measure` makes a
+    step's measurement from them; its NumPy oracle is ``measure`` in ``tests/oracles/eso_td.py``).
 
     Attributes
     ----------
@@ -193,64 +194,6 @@ class StepRows:
                    (marks[0] % m).astype(np.int64), marks[1].astype(float), (marks[0] + marks[1]).astype(float),
                    offset, tau2, n, int(with_rows[0]),
                    _initial_velocity(cols["value"], cols["u"]), lever_arm, float(dt))
-
-    def measure(self, j, C_bn, v_n, dth, df_k, v_prev, reset_sum, F_int, P, marks, w_in):
-        """The measurement of step ``j`` (the NumPy engine's; :mod:`adrc.moving_base_compiled` does the same).
-
-        Parameters
-        ----------
-        j : int
-            The step.
-        C_bn, v_n : ndarray, shapes (R, m, 3, 3), (R, m, 3)
-            The strapdown's attitude and velocity (ENU, m/s) after each of the step's samples.
-        dth, df_k : ndarray, shape (R, m, 3)
-            The samples' angle increments (body, rad) and velocity increments in ENU (``C_bn dv``, m/s).
-        v_prev : ndarray, shape (R, 2)
-            The strapdown's level velocity at the step's start (after the last reset), m/s.
-        reset_sum, F_int : ndarray, shapes (R, 2), (R, 3)
-            The velocity resets so far (m/s) and ``int f_n dt`` up to the step's start (m/s).
-        P, marks : ndarray, shapes (R, 5), (R, n_marks, 8)
-            With position intervals: the integrals of the unreset velocity (m) and of ``int f_n dt`` (m) up to the
-            step's start, advanced to its end here; each mark's integrals and lever-arm offset ``C_bn l`` (m),
-            written here when it falls in the step.
-        w_in : ndarray, shape (R, 3)
-            omega_in^n, rad/s (earth rate and transport rate, ENU).
-
-        Returns
-        -------
-        None without rows in the step, else ``y`` (R, 2) the unreset level velocity error (m/s), ``F_bar`` (R, 3)
-        ``int f_n dt`` at the rows' times (m/s), ``e_last`` (R, 2) the last row's error (m/s) and its ``age`` (s).
-        """
-        i0, i1 = self.start[j], self.start[j + 1]
-        R, dt = v_n.shape[0], self.dt
-        v_ext = np.concatenate([v_prev[:, None], v_n[..., :2]], axis=1)  # the step's start, then each sample end
-        F_ext = np.concatenate([np.zeros((R, 1, 3)), np.cumsum(df_k, axis=1)], axis=1)
-        if self.mark_k.size:
-            vals = np.concatenate([v_ext + reset_sum[:, None], F_ext + F_int[:, None]], axis=-1)  # (R, m + 1, 5)
-            P_ext = P[:, None] + np.concatenate([np.zeros((R, 1, 5)), np.cumsum(
-                0.5 * dt * (vals[:, :-1] + vals[:, 1:]), axis=1)], axis=1)
-            a, b = self.mark_start[j], self.mark_start[j + 1]
-            k, w = self.mark_k[a:b], self.mark_w[a:b, None]
-            marks[:, a:b, :5] = P_ext[:, k] + w * dt * ((1.0 - w / 2.0) * vals[:, k] + w / 2.0 * vals[:, k + 1])
-            marks[:, a:b, 5:] = lever_offset(C_bn[:, k], self.lever_arm)
-            P[:] = P_ext[:, -1]
-        if i1 == i0:
-            return None
-        k, w, lev = self.k[i0:i1], self.w[i0:i1, None], self.lever[i0:i1] == 1
-        v_at = (1.0 - w) * v_ext[:, k] + w * v_ext[:, k + 1]
-        F_at = (1.0 - w) * F_ext[:, k] + w * F_ext[:, k + 1]
-        if lev.any():
-            C = C_bn[:, k[lev]]
-            w_nb = rate_at(dth, dt, k[lev], w[lev, 0]) - np.einsum("rnji,rj->rni", C, w_in)  # omega_ib^b - C omega_in
-            v_at[:, lev] += lever_velocity(C, w_nb, self.lever_arm)[..., :2]
-        e = v_at - self.value[:, i0:i1]
-        iv = self.kind[i0:i1] == INTERVAL
-        if iv.any():  # mean over the interval: the integrals' difference over its length
-            d = (marks[:, self.mark1[i0:i1][iv]] - marks[:, self.mark0[i0:i1][iv]]) * self.inv_T[i0:i1][iv, None]
-            e[:, iv] = d[..., :2] + d[..., 5:7] - self.value[:, i0:i1][:, iv] - reset_sum[:, None]
-            F_at[:, iv] = d[..., 2:5] - F_int[:, None]
-        return e.mean(axis=1) + reset_sum, F_int + F_at.mean(axis=1), e[:, -1], self.age[i1 - 1]
-
 
     def turn_marks(self, j, m, Rd, ramp, P, marks, F_int):
         """At an attitude feedback after step ``j`` (of ``m`` samples): the marks written so far as if the strapdown

@@ -1,6 +1,7 @@
-"""The measurement of an ESO step from its rows, compiled: :meth:`adrc.eso_td_rows.StepRows.measure` for one run,
-operation for operation (the sums of three products in the lever-arm terms excepted: NumPy's einsum orders them
-its own way), for :func:`adrc.moving_base_compiled.eso_td_steps`. Frames and units as there: ENU, body RFU, m/s."""
+"""The measurement of an ESO step from its rows (:mod:`adrc.eso_td_rows`), compiled, for one run, for
+:func:`adrc.moving_base_compiled.eso_td_steps`. Its NumPy oracle is ``measure`` in ``tests/oracles/eso_td.py``, over
+the runs, operation for operation (the sums of three products in the lever-arm terms excepted: NumPy's einsum orders
+them its own way). Frames and units as there: ENU, body RFU, m/s."""
 
 from __future__ import annotations
 
@@ -61,8 +62,16 @@ def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks,
         The step's angle increments, body, rad.
     cs : ndarray, shape (m + 1, 3)
         ``int f_n dt`` from the step's start to each sample end (``cs[0]`` = 0), run ``r``, m/s.
-    v_prev, reset_sum, F_int, P, marks, w_in
-        As :meth:`adrc.eso_td_rows.StepRows.measure` (``w_in`` (3,) of run ``r``); ``P`` and ``marks`` written.
+    v_prev : ndarray, shape (R, 2)
+        The strapdown's level velocity at the step's start (after the last reset), m/s.
+    reset_sum, F_int : ndarray, shapes (R, 2), (R, 3)
+        The velocity resets so far (m/s) and ``int f_n dt`` up to the step's start (m/s).
+    P, marks : ndarray, shapes (R, 5), (R, n_marks, 8)
+        With position intervals: the integrals of the unreset velocity (m) and of ``int f_n dt`` (m) up to the
+        step's start, advanced to its end here (run ``r``); each mark's integrals and lever-arm offset ``C_bn l``
+        (m), written here when it falls in the step.
+    w_in : ndarray, shape (3,)
+        omega_in^n of run ``r``, rad/s (earth rate and transport rate, ENU).
     y, Fbar, e_last : ndarray, shapes (2,), (3,), (2,)
         Written: the unreset level velocity error, ``int f_n dt`` at the rows' times, the last row's error.
     """

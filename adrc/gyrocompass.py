@@ -58,7 +58,7 @@ The level, the default way: estimated, not commanded
 * The NLSEF (h1 = 4 s, c1 = 0.8; the velocity loop at 0.27 and 4.7 1/s with this ESO) keeps the
   computed frame within about an arcminute of level, which is all the azimuth fit needs.
 * h = ``step_s`` = 0.1 s: ten 100-Hz samples per step, the reference averaged over them (nothing is lost at
-  these bandwidths), five times fewer Python steps than h = 0.02 s.
+  these bandwidths), five times fewer control steps than h = 0.02 s.
 
 Checked on 100-Hz simulations, 300 and 600 s (static, 1-2 deg and seed-000 sways; latitudes 0, 34,
 -45, 60, 75 deg; headings 0, 90, 179, -179 deg; seed000, navigation and tactical grade; 0, 0.01 and
@@ -99,11 +99,10 @@ from fusionbench.aligner import AlignmentResult, Site, variant
 from fusionbench.claims import Supports
 from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imu import load_spec
-from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
 from fusionbench.strapdown import rodrigues
 
 from .gyrocompass_compiled import run_compiled
-from .primitives import ExtendedStateObserver, nlsef
 
 _H = 0.02  # the printed step, s
 
@@ -200,7 +199,9 @@ class ADRCGyrocompass(AlignerBase):
     """ADRC gyrocompass (method ``adrc``): the levels read off the ESO, the azimuth off the commands.
 
     The defaults are this project's working configuration (see the module docstring);
-    ``ADRCGyrocompass(**PAPER_PARAMETERS)`` is seed 000's printed one.
+    ``ADRCGyrocompass(**PAPER_PARAMETERS)`` is seed 000's printed one. The whole control loop (strapdown, ESO,
+    NLSEF, azimuth fit) is compiled, all runs in one call (:mod:`adrc.gyrocompass_compiled`); its NumPy oracle is
+    ``tests/oracles/adrc_gyrocompass.py``.
 
     Parameters
     ----------
@@ -235,10 +236,6 @@ class ADRCGyrocompass(AlignerBase):
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
         rate (:func:`fusionbench.claims.check_azimuth_observable`); None: not checked.
-    engine : {"numba", "numpy"}
-        The whole control loop (strapdown, ESO, NLSEF, azimuth fit) compiled, all runs in one call
-        (:mod:`adrc.gyrocompass_compiled`; default), or the NumPy loop over control steps, the reference: the same
-        operations in the same order, identical results.
     """
 
     positive_options = ("step_s", "h1", "c0", "c1", "delta", "eso_bandwidth", "shot_s")
@@ -251,8 +248,7 @@ class ADRCGyrocompass(AlignerBase):
 
     def __init__(self, step_s=0.1, c0=1.0, r0=None, h0=None, beta01=None, beta02=None, beta03=None, delta=20000.0,
                  eso_bandwidth=0.13, r1=None, c1=0.8, h1=4.0, level="observer", fit_from_s=10.0, shot_s=40.0,
-                 refine=True, imu=None, engine="numba"):
-        self.engine = check_engine(self.name, engine)
+                 refine=True, imu=None):
         self.spec = None if imu is None else load_spec(imu)
         self.step_s = float(step_s)
         self.c0, self.c1, self.delta = c0, c1, float(delta)
@@ -305,11 +301,8 @@ class ADRCGyrocompass(AlignerBase):
         hist_az = np.full((R, loop.records), np.nan)
         every = max(1, int(round(0.1 / h)))  # the azimuth estimate is refreshed at 10 Hz
         tilt = np.zeros((R, loop.records, 2))  # the ESO's tilt estimate z2 / b0 = [ay, ax], rad
-        if self.engine == "numba":
-            az_shot = run_compiled(loop, fit, {**k, "delta": self.delta, "c1": self.c1}, b0, fit_from, shot_step,
-                                   every, hist_C, hist_az, tilt)
-        else:
-            az_shot = self._run_numpy(loop, fit, k, b0, fit_from, shot_step, every, hist_C, hist_az, tilt)
+        az_shot = run_compiled(loop, fit, {**k, "delta": self.delta, "c1": self.c1}, b0, fit_from, shot_step, every,
+                               hist_C, hist_az, tilt)
         t_last = loop.finish()  # the samples after the last ADRC step: the result ends at the last sample
         if t_last is not None:
             hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn
@@ -320,31 +313,6 @@ class ADRCGyrocompass(AlignerBase):
         az_used = hist_az if self.refine else np.broadcast_to(az_shot[:, None], hist_az.shape)
         hist_C[:, shot_step:] = correct_azimuth(hist_C[:, shot_step:], az_used[:, shot_step:])  # eqs. 17-18
         return AlignmentResult(self.name, hist_t, hist_C, {"azimuth_shot_rad": az_shot, "azimuth_estimate_rad": hist_az})
-
-    def _run_numpy(self, loop, fit, k, b0, fit_from, shot_step, every, hist_C, hist_az, tilt):
-        """The control loop of :meth:`_align` with the NumPy engine (arguments and result as
-        :func:`adrc.gyrocompass_compiled.run_compiled`): one step at a time, NumPy over the runs."""
-        R, h = loop.R, loop.step_s
-        eso = ExtendedStateObserver((R, 2), h, k["beta01"], k["beta02"], k["beta03"], self.delta, b0)
-        u = np.zeros((R, 2))
-        az_shot = np.full(R, np.nan)
-        az = np.full(R, np.nan)
-        for j, t, dv in loop:
-            applied = np.stack([u[:, 1], u[:, 0]], axis=-1)  # [w_cE, w_cN] used during this period
-            z1, z2, z3 = eso.update(dv[:, :2], u)
-            # the TD's reference is zero and it starts at rest on it: v1 = v2 = 0 throughout
-            u = nlsef(-z1, -z2, z3, b0, k["r1"], k["h1"], self.c1)
-            if j >= fit_from:
-                fit.add(dv[:, :2], applied)
-                if j == shot_step or (j - fit_from) % every == 0:
-                    az = fit.azimuth()
-                hist_az[:, j] = az
-                if j == shot_step:
-                    az_shot = az
-            loop.omega_c = np.stack([u[:, 1], u[:, 0], np.zeros(R)], axis=-1)
-            hist_C[:, j] = loop.sd.state.C_bn
-            tilt[:, j] = z2 / b0
-        return az_shot
 
 
 #: ``adrc-paper``: seed 000's printed parameters (h = 0.02 s, h1 = 10 h, the ESO of eq. 9 as printed, the level

@@ -1,13 +1,13 @@
-"""The ADRC gyrocompass's control loop compiled (``engine="numba"`` of :class:`adrc.gyrocompass.ADRCGyrocompass`).
+"""The ADRC gyrocompass's control loop, compiled (the loop of :class:`adrc.gyrocompass.ADRCGyrocompass`).
 
 :func:`adrc_steps` runs every control step of all the runs in one numba call: the strapdown over the step's
 samples with the commands held and the velocity error against the reference
 (:func:`fusionbench.compass_compiled.command_step`), the ESO (eq. 9) and the NLSEF (eq. 11) of both level channels,
-and the azimuth fit's sums (:func:`fusionbench.compass_compiled.fit_step`). The fit is read (its 6x6 solve) only
-where the NumPy loop reads it, from the sums kept at those steps, in one batched NumPy call afterwards
-(:func:`run_compiled`); the attitude the method reports is made from the histories by the same NumPy code for both
-engines. The operations are the NumPy loop's, in its order: the two engines give identical results
-(``tests/test_gyrocompass.py``).
+and the azimuth fit's sums (:func:`fusionbench.compass_compiled.fit_step`). The fit is read (its 6x6 solve) every
+``every`` steps from ``fit_from`` (0.1 s) and at the shot, from the sums kept at those steps, in one batched NumPy
+call afterwards (:func:`run_compiled`); the method makes the attitude it reports from the histories. The operations
+are those of the NumPy oracle ``tests/oracles/adrc_gyrocompass.py`` (a loop over control steps on the primitives of
+:mod:`adrc.primitives`), in its order: the two give identical results (``tests/test_gyrocompass.py``).
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def adrc_steps(arrays, gains, b0, z, u, fit_from, record, hist_C, tilt, rec_t_su
 
 
 def run_compiled(loop, fit, gains, b0, fit_from, shot_step, every, hist_C, hist_az, tilt):
-    """The ADRC loop of :meth:`adrc.gyrocompass.ADRCGyrocompass._align` with the numba engine.
+    """The ADRC loop of :meth:`adrc.gyrocompass.ADRCGyrocompass._align`, compiled.
 
     Parameters
     ----------
@@ -91,7 +91,7 @@ def run_compiled(loop, fit, gains, b0, fit_from, shot_step, every, hist_C, hist_
     fit_from, shot_step, every : int
         First step of the fit, step of the azimuth shot, and the interval (steps) at which the azimuth is read.
     hist_C, hist_az, tilt : ndarray
-        The histories (R, records, ...) the NumPy loop fills; the first ``loop.steps`` entries are written.
+        The histories (R, records, ...); the first ``loop.steps`` entries are written.
 
     Returns
     -------
@@ -100,7 +100,7 @@ def run_compiled(loop, fit, gains, b0, fit_from, shot_step, every, hist_C, hist_
     """
     R, steps = loop.R, loop.steps
     js = np.arange(fit_from, steps)
-    read = js[(js == shot_step) | ((js - fit_from) % every == 0)]  # the steps at which the NumPy loop reads the fit
+    read = js[(js == shot_step) | ((js - fit_from) % every == 0)]  # the steps at which the fit is read
     record = np.full(steps, -1, dtype=np.int64)
     record[read] = np.arange(read.size)
     rec_t_sums, rec_sums = np.zeros((read.size, 3)), np.zeros((R, read.size, 9))

@@ -27,7 +27,7 @@ from fusionbench.aligner_base import AlignerBase, coarse_then_fine
 from fusionbench.imu import load_spec
 from fusionbench.attitude import apply_misalignment
 from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.compass import MAX_LATITUDE_DEG, check_engine
+from fusionbench.compass import MAX_LATITUDE_DEG
 from fusionbench.strapdown import NavState, Strapdown
 
 from .eso_td_rows import StepRows
@@ -104,9 +104,6 @@ class ESOTDAligner(AlignerBase):
     coarse_s : float
         Without an initial attitude, the inertial-frame coarse alignment runs this long first, s (with the
         aiding valid then, if any: :class:`fusionbench.coarse.InertialCoarseAligner`).
-    engine : {"numba", "numpy"}
-        The step loop compiled, all runs in one call between feedbacks (:mod:`adrc.moving_base_compiled`; default),
-        or the NumPy loop over steps, the reference: the same operations in the same order (equal to rounding).
 
     Attributes
     ----------
@@ -138,8 +135,8 @@ class ESOTDAligner(AlignerBase):
     def __init__(self, step_s=0.1, alpha1=1.0, alpha2=1.0, delta1=None, delta2=None, beta11=0.1, beta12=0.0025,
                  beta21=0.1, beta22=0.0025, eso_start="ls", td="ls", td_h1=None, td_r=500.0, td_start_s="auto",
                  td_min_s=10.0, td_memory_s=None, force_h1=5.0, feedback_from_s="auto", feedback_every_s=10.0,
-                 feedback_limit_deg=15.0, coarse_s=60.0, imu=None, engine="numba"):
-        self.spec, self.engine = None if imu is None else load_spec(imu), check_engine(self.name, engine)
+                 feedback_limit_deg=15.0, coarse_s=60.0, imu=None):
+        self.spec = None if imu is None else load_spec(imu)
         self.step_s = float(step_s)
         if not self.step_s > 0:
             raise ValueError(f"step_s: expected a positive step in s, found {step_s}")
@@ -263,19 +260,8 @@ class ESOTDAligner(AlignerBase):
         hist_t, hist_C = np.empty(records), np.empty((R, records, 3, 3))
         hist_t[:steps] = t[m - 1:steps * m:m]  # the ends of the steps
         hist_psi, hist_fb, hist_y = (np.empty((R, records, n)) for n in (3, 3, 2))
-        if self.engine == "numba":  # the loop below, compiled
-            run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y)
-        for j in range(steps) if self.engine == "numpy" else ():
-            out = sd.run(dth_b[j], dv_b[j], record_every=1)
-            st = sd.state
-            psi = est.step(j, out["C_bn"], out["v_n"], dth_b[j], dv_b[j], st)
-            hist_C[:, j] = apply_misalignment(st.C_bn, -psi)
-            hist_y[:, j] = est.y
-            est.reset_velocity(st)  # at rows (keeps eq. 1's neglected dv / R terms negligible)
-            if est.feedback_due(j):
-                psi = est.feedback(j, psi, st)
-            hist_psi[:, j] = psi
-            hist_fb[:, j] = est.psi_fb
+        # the steps, compiled, all runs in one call between feedbacks (NumPy oracle: tests/oracles/eso_td.py)
+        run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y)
         if records > steps:  # the samples after the last step, through the strapdown, the last estimate removed
             sd.run(dth[:, steps * m:], dvel[:, steps * m:], record_every=t.size - steps * m)
             hist_t[-1], hist_C[:, -1] = t[-1], apply_misalignment(sd.state.C_bn, -hist_psi[:, -2])

@@ -1,18 +1,17 @@
-"""The ESO/TD aligner's loop compiled (``engine="numba"`` of :class:`adrc.moving_base.ESOTDAligner`).
+"""The ESO/TD aligner's step loop, compiled: the loop of :meth:`adrc.moving_base.ESOTDAligner._align`.
 
 :func:`eso_td_steps` runs the ESO/TD steps of all the runs in one numba call: the strapdown over the step's samples
-(position free, height held), the measurement of the rows valid in the step (:func:`_measure`, the compiled
-:meth:`adrc.eso_td_rows.StepRows.measure`) and the specific force (ENU, m/s^2) of the step, the ESO of eq. 6 on
-both level channels (a correction with rows, the prediction alone without), eqs. 7, 9 and 12 with the fst TD
-(``td="fst"``) or the least-squares TD and its copies of the ESO's filter (``td="ls"``), and the velocity reset at
-rows: what :meth:`adrc.eso_td_estimator.ESOTDEstimator.step` and the loop of :meth:`adrc.moving_base.ESOTDAligner._align`
-do, on the estimator's own arrays, operation for operation and in the same order. It stops at each attitude
-feedback (every ``feedback_every_s``, 10 s by default), which the estimator's NumPy code makes
-(:meth:`~adrc.eso_td_estimator.ESOTDEstimator.feedback`, :func:`run_compiled`); the reported attitude, the strapdown's
-turned by the estimate, is made from the histories in one NumPy call. NumPy's einsum sums products in its own
-order (:func:`_rotate_sum` follows it for the specific force on this machine's 4-lane vectors), and the lever-arm
-terms' sums of three products differ from it in the last bit, so the engines agree to rounding
-(``tests/test_eso_td_aiding.py`` derives the tolerance).
+(position free, height held), the measurement of the rows valid in the step (:func:`adrc.eso_td_rows_compiled.measure`)
+and the specific force (ENU, m/s^2) of the step, the ESO of eq. 6 on both level channels (a correction with rows, the
+prediction alone without), eqs. 7, 9 and 12 with the fst TD (``td="fst"``) or the least-squares TD and its copies of
+the ESO's filter (``td="ls"``), and the velocity reset at rows, on the estimator's own arrays
+(:class:`adrc.eso_td_estimator.ESOTDEstimator`). It stops at each attitude feedback (every ``feedback_every_s``, 10 s
+by default), which the estimator's NumPy code makes (:meth:`~adrc.eso_td_estimator.ESOTDEstimator.feedback`,
+:func:`run_compiled`); the reported attitude, the strapdown's turned by the estimate, is made from the histories in
+one NumPy call. Its NumPy oracle, ``tests/oracles/eso_td.py``, makes the same operations in the same order, a step at
+a time over the runs. NumPy's einsum sums products in its own order (:func:`_rotate_sum` follows it for the specific
+force on this machine's 4-lane vectors), and the lever-arm terms' sums of three products differ from it in the last
+bit, so the loop and its oracle agree to rounding (``tests/test_eso_td_aiding.py`` derives the tolerance).
 """
 
 from __future__ import annotations
@@ -267,8 +266,9 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
 
 
 def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
-    """The loop of :meth:`adrc.moving_base.ESOTDAligner._align` with the numba engine: :func:`eso_td_steps` between
-    the attitude feedbacks, each made by ``est.feedback`` (the NumPy reference's own code).
+    """The step loop of :meth:`adrc.moving_base.ESOTDAligner._align`: :func:`eso_td_steps` between the attitude
+    feedbacks, each made by ``est.feedback`` (NumPy, once per feedback). Its NumPy oracle: ``run_numpy`` in
+    ``tests/oracles/eso_td.py``, with the same arguments and effects.
 
     Parameters
     ----------
@@ -279,7 +279,8 @@ def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
     dth_b, dv_b : ndarray, shape (steps, R, m, 3)
         Increments (rad, m/s, body), one block per step.
     hist_C, hist_psi, hist_fb, hist_y : ndarray
-        The histories the NumPy loop fills (R, records, ...); the first ``steps`` entries are written.
+        The histories (R, records, ...): the attitude reported, the estimate psi after any feedback, the corrections
+        so far, the unreset velocity error; the first ``steps`` entries are written.
     """
 
     a, R, h, steps, n = est.a, est.R, est.h, dth_b.shape[0], est.n

@@ -44,7 +44,8 @@ def fhan(x1, x2, r, h, c=1.0):
 
 def fhan_arithmetic(x1, x2, r, h, c):
     """The arithmetic of :func:`fhan` on floats or float arrays, free of conversions so that numba compiles it
-    unchanged for one value (:mod:`adrc.primitives_compiled`: both engines then share every operation)."""
+    unchanged for one value (:mod:`adrc.primitives_compiled`: a compiled loop and its NumPy oracle then share every
+    operation)."""
     d = r * h * h
     a0 = h * c * x2
     y = x1 + a0

@@ -1,4 +1,4 @@
-"""The primitives of :mod:`adrc.primitives` for one value, compiled with numba for the ``"numba"`` engines' loops.
+"""The primitives of :mod:`adrc.primitives` for one value, compiled with numba for the compiled control loops.
 
 Each function here does the operations of its NumPy namesake on one element, in the same order, so a compiled
 loop reproduces the NumPy reference exactly (IEEE arithmetic, no fast-math). :func:`fhan` is the reference's own

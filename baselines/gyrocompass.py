@@ -52,7 +52,7 @@ from fusionbench.aligner import AlignmentResult, Site
 from fusionbench.claims import Supports
 from fusionbench.aligner_base import AlignerBase, per_increment_velocity
 from fusionbench.imu import load_spec
-from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, check_engine, correct_azimuth
+from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
 
 from .gyrocompass_compiled import run_compiled
 
@@ -89,11 +89,13 @@ def compass_gains(td, xi, ws2, g, level_td=None):
 
 
 class PIDLoops:
-    """The PID gyrocompass's loops over R runs, stepped once per control step (the module docstring's names).
+    """The states of the PID gyrocompass's loops over R runs (the module docstring's names) and its azimuth shot.
 
-    Each step takes the level velocity errors [vE, vN] and gives the commanded rate and the velocity the
-    damping terms remove. The east channel is always a third-order level loop (gains k1, k2, k3); the north
-    channel is one too, or, once the compass gains (c1..c4 of :func:`compass_gains`) are given, the compass loop.
+    The compiled control loop (:func:`baselines.gyrocompass_compiled.pid_steps`; its NumPy oracle is
+    ``tests/oracles/pid_gyrocompass.py``) steps them once per control step in place: each step takes the level
+    velocity errors [vE, vN] and gives the commanded rate and the velocity the damping terms remove. The east
+    channel is always a third-order level loop (gains k1, k2, k3); the north channel is one too, or, from the first
+    compass stage on (the compass gains c1..c4 of :func:`compass_gains`), the compass loop.
 
     Parameters
     ----------
@@ -140,37 +142,12 @@ class PIDLoops:
         self.J[:, 0] -= self.wN * np.sin(az)
         self.J[:, 1] += self.wN * (1.0 - np.cos(az))
 
-    def step(self, vE, vN, level, compass=None):
-        """One control step with the velocity errors ``vE``, ``vN`` (R,) m/s.
-
-        ``level`` = (k1, k2, k3) of :func:`level_gains`; ``compass`` = (c1, c2, c3, c4) of :func:`compass_gains`
-        makes the north channel the compass loop. Updates :attr:`omega_c`; returns the velocity corrections
-        ``dE``, ``dN`` (R,) m/s that the damping terms take off the strapdown's velocity."""
-        h, radius = self.h, self.radius
-        k1, k2, k3 = level
-        J = self.J
-        # east channel: third-order level loop in every stage
-        J[:, 1] += k3 * vE * h
-        w_cN = (1 + k2) * vE / radius + J[:, 1]
-        dE = k1 * vE * h
-        if compass is None:
-            J[:, 0] += k3 * vN * h
-            w_cE = -(1 + k2) * vN / radius - J[:, 0]
-            w_cU = np.zeros(vN.shape)
-            dN = k1 * vN * h
-        else:
-            c1, c2, c3, c4 = compass
-            self.x += (vN - c4 * self.x) * h
-            w_cE = -(1 + c2) * vN / radius
-            w_cU = c3 / self.wN * self.x
-            dN = c1 * vN * h
-        self.damp += np.stack([dE, dN], axis=-1)
-        self.omega_c = np.stack([w_cE, w_cN, w_cU], axis=-1)
-        return dE, dN
-
 
 class PIDGyrocompass(AlignerBase):
     """Classical gyrocompass (method ``pid``): third-order level loops and a compass loop, staged.
+
+    The whole control loop (strapdown, azimuth fit, level and compass loops) is compiled, all runs in one call
+    (:mod:`baselines.gyrocompass_compiled`); its NumPy oracle is ``tests/oracles/pid_gyrocompass.py``.
 
     Parameters
     ----------
@@ -191,10 +168,6 @@ class PIDGyrocompass(AlignerBase):
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
         rate (:func:`fusionbench.claims.check_azimuth_observable`); None: not checked.
-    engine : {"numba", "numpy"}
-        The whole control loop (strapdown, azimuth fit, level and compass loops) compiled, all runs in one call
-        (:mod:`baselines.gyrocompass_compiled`; default), or the NumPy loop over control steps, the reference: the
-        same operations in the same order, identical results.
     """
 
     positive_options = ("step_s", "shot_s", "level_td_s")
@@ -209,9 +182,7 @@ class PIDGyrocompass(AlignerBase):
                    "from any heading")
 
     def __init__(self, step_s=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
-                 compass_stages=((90.0, 50.0, 130.0), (160.0, 50.0, 333.0), (260.0, 50.0, 800.0)), imu=None,
-                 engine="numba"):
-        self.engine = check_engine(self.name, engine)
+                 compass_stages=((90.0, 50.0, 130.0), (160.0, 50.0, 333.0), (260.0, 50.0, 800.0)), imu=None):
         self.spec = None if imu is None else load_spec(imu)
         self.step_s, self.xi = float(step_s), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
@@ -248,21 +219,7 @@ class PIDGyrocompass(AlignerBase):
         gains = [level_gains(self.level_td_s, self.xi, ws2, g) + (0.0,) * 4]
         gains += [level_gains(lv, self.xi, ws2, g) + compass_gains(az, self.xi, ws2, g, level_td=lv)
                   for _, lv, az in self.compass_stages]
-        if self.engine == "numba":
-            az_shot = run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C)
-        else:
-            az_shot = np.full(R, np.nan)
-            for j, t, dv in loop:
-                if j >= fit_from and j <= shot_step:
-                    fit.add(dv[:, :2] + loops.damp, loops.omega_c[:, :2])
-                if j == shot_step:
-                    az_shot = loops.shot(loop, fit)
-                stage = int(np.searchsorted(stage_steps, j, side="right"))
-                dE, dN = loops.step(dv[:, 0], dv[:, 1], gains[stage][:3], None if stage == 0 else gains[stage][3:])
-                loop.sd.state.v_n[:, 0] -= dE
-                loop.sd.state.v_n[:, 1] -= dN
-                loop.omega_c = loops.omega_c
-                hist_C[:, j] = loop.sd.state.C_bn
+        az_shot = run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C)
         t_last = loop.finish()  # the samples after the last control step: the result ends at the last sample
         if t_last is not None:
             hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn

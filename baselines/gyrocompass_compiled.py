@@ -1,13 +1,13 @@
-"""The PID gyrocompass's control loop compiled (``engine="numba"`` of :class:`baselines.gyrocompass.PIDGyrocompass`).
+"""The PID gyrocompass's control loop, compiled (the loop of :class:`baselines.gyrocompass.PIDGyrocompass`).
 
 :func:`pid_steps` runs the control steps of all the runs in one numba call: the strapdown over the step's samples
 with the commands held and the velocity error against the reference
 (:func:`fusionbench.compass_compiled.command_step`), the azimuth fit's sums until the shot
-(:func:`fusionbench.compass_compiled.fit_step`), and the staged
-level and compass loops of :class:`baselines.gyrocompass.PIDLoops` with their velocity damping, on that object's
-own arrays. It stops at the shot (once per run), where the NumPy code turns the attitude by the fitted azimuth
-(:meth:`baselines.gyrocompass.PIDLoops.shot`, from :func:`run_compiled`), and goes on from there. The operations
-are the NumPy loop's, in its order: the two engines give identical results (``tests/test_gyrocompass.py``).
+(:func:`fusionbench.compass_compiled.fit_step`), and the staged level and compass loops with their velocity damping,
+on the states of :class:`baselines.gyrocompass.PIDLoops` (that object's own arrays). It stops at the shot (once per
+run), where the NumPy code turns the attitude by the fitted azimuth (:meth:`baselines.gyrocompass.PIDLoops.shot`,
+from :func:`run_compiled`), and goes on from there. The operations are those of the NumPy oracle
+``tests/oracles/pid_gyrocompass.py``, in its order: the two give identical results (``tests/test_gyrocompass.py``).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
         while stage < stage_steps.size and stage_steps[stage] <= j:
             stage += 1
         k1, k2, k3, c1, c2, c3, c4 = gains[stage]
-        for r in range(runs):  # PIDLoops.step
+        for r in range(runs):  # the oracle's step (tests/oracles/pid_gyrocompass.py)
             vE, vN = dv[r, 0], dv[r, 1]
             J[r, 1] += k3 * vE * h
             w_cN = (1 + k2) * vE / radius + J[r, 1]
@@ -93,7 +93,7 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
 
 
 def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C):
-    """The PID loop of :meth:`baselines.gyrocompass.PIDGyrocompass._align` with the numba engine.
+    """The PID loop of :meth:`baselines.gyrocompass.PIDGyrocompass._align`, compiled.
 
     Parameters
     ----------
@@ -120,7 +120,7 @@ def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist
              float(loops.radius), loops.J, loops.x, loops.damp, loops.omega_c, hist_C)
     az_shot = np.full(loop.R, np.nan)
     j = pid_steps(arrays, 0, False, *state)
-    if j < loop.steps:  # the shot, by the NumPy loop's own code
+    if j < loop.steps:  # the shot, by PIDLoops.shot (NumPy)
         az_shot = loops.shot(loop, fit)
         pid_steps(arrays, j, True, *state)
     loop.omega_c = loops.omega_c

@@ -32,9 +32,8 @@ from .attitude import rotvec_to_dcm
 from .claims import Supports
 from .coarse_aided import aided_fit, aiding_rows, fit_rotation, imu_at_rows, place
 from .coarse_inertial import c_n_i0, gravity_integral_inertial
-from .coarse_kernel import body_pass, body_pass_numpy
+from .coarse_kernel import body_pass
 from .coarse_level import relevel
-from .compass import check_engine
 from .imu import load_spec
 from .imudata import IMUData
 from .strapdown import body_increments
@@ -145,9 +144,6 @@ class InertialCoarseAligner(AlignerBase):
         four sub-windows (a base moving a little, e.g. a moored ship), over 2.
     imu : str, path or IMUSpec, optional
         The IMU, used only to refuse when its gyro bias hides the earth rate; None: not checked.
-    engine : {"numba", "numpy"}
-        The pass over the samples compiled (:func:`fusionbench.coarse_kernel.body_pass`, default) or in NumPy, a
-        Python step per sample (the reference: the same results to rounding, ten to a hundred times slower).
 
     The method's own motion checks (``motion_mps``, ``motion_mps_per_s2``, ``max_gravity_excess`` of earlier
     versions) gave way to the input policy's, the same for every aligner (:func:`fusionbench.motion.check_stationary`).
@@ -167,8 +163,7 @@ class InertialCoarseAligner(AlignerBase):
     max_latitude_deg = 89.0  # as the analytic coarse alignment: no north at the pole
 
     def __init__(self, history_points: int = 100, fit_points: int = 50, caller: str | None = None, imu=None,
-                 level_window_s: float | None = 20.0, level_noise_max: float = 3e-5, engine: str = "numba"):
-        self.engine = check_engine(self.name, engine)
+                 level_window_s: float | None = 20.0, level_noise_max: float = 3e-5):
         self.spec = None if imu is None else load_spec(imu)
         self.level_window_s = None if not level_window_s else float(level_window_s)
         self.level_noise_max = float(level_noise_max)
@@ -215,7 +210,7 @@ class InertialCoarseAligner(AlignerBase):
         C_b, dv_b = body_increments(dth, dv, np.zeros((R, 3)), np.zeros((R, 3)))
         C_out, V_out = np.empty((R, ckeep.size, 3, 3)), np.empty((R, vkeep.size, 3))
         P_out = np.empty((R, vkeep.size if integral else 0, 3))
-        (body_pass if self.engine == "numba" else body_pass_numpy)(
+        body_pass(
             np.ascontiguousarray(C_b), np.ascontiguousarray(dv_b), imu.dt, ckeep, vkeep, C_out, V_out, P_out)
         C_keep, V_keep = C_out[:, np.searchsorted(ckeep, keep)], V_out[:, np.searchsorted(vkeep, keep)]
         tk = t[keep] - imu.t0

@@ -1,12 +1,12 @@
-"""The inertial-frame coarse alignment's pass over the samples, compiled (``coarse-i0``'s default engine).
+"""The inertial-frame coarse alignment's pass over the samples, compiled (``coarse-i0``'s loop).
 
 :class:`fusionbench.coarse.InertialCoarseAligner` carries, for every run, the body attitude since the start
 ``C`` (the product of the per-sample body rotations, body frame at t0 to body frame now) and the integrated
 specific force ``V`` (m/s, in the body frame at t0) over every sample, and keeps ``C`` at a few hundred samples (the
 history) and ``V`` at those and at the samples around each aiding row (and, for rows that give a mean velocity over
 an interval, the integral of ``V``, m). In NumPy that is a Python loop over the
-samples with a few (R, 3, 3) products each (``engine="numpy"``, :func:`body_pass_numpy`, the reference); here it is
-one compiled loop over runs and samples, the same arithmetic.
+samples with a few (R, 3, 3) products each (``tests/oracles/coarse.py``, the reference the tests hold it to); here
+it is one compiled loop over runs and samples, the same arithmetic.
 """
 
 from __future__ import annotations
@@ -68,25 +68,3 @@ def body_pass(C_b, dv_b, dt, ckeep, vkeep, C_out, V_out, P_out):
                 if with_p:
                     P_out[r, jv] = P
                 jv += 1
-
-
-def body_pass_numpy(C_b, dv_b, dt, ckeep, vkeep, C_out, V_out, P_out):
-    """:func:`body_pass` in NumPy, a Python step per sample over all runs at once (the reference)."""
-    R, N = dv_b.shape[:2]
-    C = np.broadcast_to(np.eye(3), (R, 3, 3)).copy()
-    V = np.zeros((R, 3))
-    P = np.zeros((R, 3))
-    jc = jv = 0
-    for k in range(N):
-        dV = (C @ dv_b[:, k, :, None])[..., 0]
-        P = P + (V + 0.5 * dV) * dt
-        V = V + dV
-        C = C @ C_b[:, k]
-        if jc < ckeep.size and ckeep[jc] == k:
-            C_out[:, jc] = C
-            jc += 1
-        if jv < vkeep.size and vkeep[jv] == k:
-            V_out[:, jv] = V
-            if P_out.shape[1]:
-                P_out[:, jv] = P
-            jv += 1

@@ -30,17 +30,6 @@ from .strapdown import NavState, Strapdown
 #: Highest abs(latitude) of the gyrocompass-type aligners, deg (their ``max_latitude_deg``): they lose the compass
 #: effect toward the poles (wN = OMEGA_IE cos L -> 0).
 MAX_LATITUDE_DEG = 80.0
-#: Engines of the aligners whose control loop is compiled (their ``engine`` option): the whole loop in numba
-#: (:mod:`fusionbench.compass_compiled` and the methods' kernels; the default), or the NumPy loop over control steps,
-#: the reference the tests compare it with (the same arithmetic in the same order: identical results).
-ENGINES = ("numba", "numpy")
-
-
-def check_engine(method, engine):
-    """``engine`` if it is one of :data:`ENGINES`, else a one-line ValueError naming ``method`` and the option."""
-    if not isinstance(engine, str) or engine not in ENGINES:
-        raise ValueError(f"{method}: option engine: expected one of {ENGINES}, found {engine!r}")
-    return engine
 
 
 class AzimuthFit:

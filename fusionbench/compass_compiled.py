@@ -1,16 +1,17 @@
 """Compiled twins of the per-step pieces of :mod:`fusionbench.compass`, for control loops written as numba code.
 
-A gyrocompass-type aligner whose whole control loop is compiled (the ``"numba"`` engine of ``adrc``, ``pid``) steps
-the strapdown of a :class:`fusionbench.compass.CommandLoop` with :func:`command_step` and feeds an
+A gyrocompass-type aligner whose whole control loop is compiled (``adrc``, ``pid``) steps the strapdown of a
+:class:`fusionbench.compass.CommandLoop` with :func:`command_step` and feeds an
 :class:`fusionbench.compass.AzimuthFit` with :func:`fit_step`, both on the objects' own arrays
 (:func:`loop_arrays`: ``Strapdown.compiled_state()``, ``AzimuthFit.compiled_state()``), so the objects stay
 consistent for the NumPy code that runs before or after the compiled loop (a one-shot correction, the tail of the
 record, the azimuth solve).
 
-The arithmetic is that of the NumPy methods, operation for operation and in the same order, so both engines give
-identical results (IEEE arithmetic, no fast-math). One detail matters: ``(n h) ** 2`` is Python's float power, C's
-``pow``, which differs from ``x * x`` in the last bit for about one value in a thousand; numba turns a power with a
-literal exponent into a product, so the exponent reaches :func:`fit_add` at run time (``two``).
+The arithmetic is that of the NumPy methods, operation for operation and in the same order, so a compiled loop and
+its NumPy oracle (``tests/oracles/``) give identical results (IEEE arithmetic, no fast-math). One detail matters:
+``(n h) ** 2`` is Python's float power, C's ``pow``, which differs from ``x * x`` in the last bit for about one value
+in a thousand; numba turns a power with a literal exponent into a product, so the exponent reaches :func:`fit_add`
+at run time (``two``).
 """
 
 from __future__ import annotations

@@ -18,10 +18,8 @@ compensation used by pyins and PSINS):
 * velocity ``v <- v + (I - [zeta x]/2) C_bn dv_b + (g^n - (2 omega_ie^n + omega_en^n) x v_mid) dt``;
 * position by the trapezoid rule on velocity.
 
-Two engines do the same arithmetic: ``"numba"`` (default), a compiled loop over runs and samples
-(:mod:`fusionbench.strapdown_compiled`), and ``"numpy"``, a Python loop over samples with NumPy arrays
-over runs (here); the second is the readable reference the tests compare the first with
-(``benchmarks/perf_core.py`` shows the gain).
+The loop over runs and samples is compiled (:mod:`fusionbench.strapdown_compiled`); the tests hold it to a
+NumPy loop over samples with arrays over runs that makes the same operations (``tests/oracles/strapdown.py``).
 
 Long recordings are processed in chunks (:meth:`Strapdown.run` takes any number of samples and
 keeps its state between calls), so a 20-hour, 100 Hz run never holds more than a chunk.
@@ -33,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import earth
 from .strapdown_compiled import _integrate_numba
 
 _I3 = np.eye(3)
@@ -162,8 +159,6 @@ class Strapdown:
         If True, latitude, longitude and height stay at their initial values and the transport rate
         is zero (the usual choice for alignment on a stationary base, where the velocity is an
         error, not motion).
-    engine : {"numba", "numpy"}, optional
-        Compiled loop (default) or the NumPy reference loop; results agree to rounding.
     height_fixed : bool, optional
         Hold the height and zero the vertical velocity (the vertical channel of a free inertial
         solution diverges with time constant sqrt(R / 2g), about 9.5 min); implied by
@@ -175,11 +170,7 @@ class Strapdown:
     therefore ``O(chunk)`` however long the recording.
     """
 
-    def __init__(self, state: NavState, dt: float, position_fixed: bool = False, engine: str = "numba",
-                 height_fixed: bool = False):
-        if engine not in ("numba", "numpy"):
-            raise ValueError(f"engine: expected 'numba' or 'numpy', found {engine!r}")
-        self.engine = engine
+    def __init__(self, state: NavState, dt: float, position_fixed: bool = False, height_fixed: bool = False):
         self.state = state.copy()
         self.dt = float(dt)
         self.position_fixed = position_fixed
@@ -243,48 +234,5 @@ class Strapdown:
         s = self.state
         args = (s.C_bn, s.v_n, s.lat, s.lon, s.h, self._v_prev, self._th_prev, self._dv_prev,
                 dtheta, dvel, cmd, self.dt, self.position_fixed, self.height_fixed, record_every, out_C, out_v, out_p)
-        if self.engine == "numba":
-            _integrate_numba(*args)
-        else:
-            _integrate_numpy(*args)
+        _integrate_numba(*args)
         return {"C_bn": out_C, "v_n": out_v, "lat": out_p[..., 0], "lon": out_p[..., 1], "h": out_p[..., 2]}
-
-
-def _integrate_numpy(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
-                     position_fixed, height_fixed, record_every, out_C, out_v, out_p):
-    """Reference engine: loop over samples, NumPy over runs. Updates the state arrays in place."""
-    n = dtheta.shape[1]
-    C_b, dv_b = body_increments(dtheta, dvel, th_prev, dv_prev)
-    C, v, lat, lon, h, v_prev = C0.copy(), v0.copy(), lat0.copy(), lon0.copy(), h0.copy(), v_prev0.copy()
-    for k in range(n):
-        v_mid = 1.5 * v - 0.5 * v_prev
-        rm, rn = earth.radii(lat)
-        rmh, rnh = rm + h, rn + h
-        g_n = earth.gravity_n(lat, h)
-        w_ie = earth.earth_rate_n(lat)
-        w_en = earth.transport_rate_n(v_mid, lat, h) * (not position_fixed)
-        w_in = w_ie + w_en
-        if cmd.shape[1]:
-            w_in = w_in + cmd[:, k]
-        zeta = w_in * dt
-        dv_n = (C @ dv_b[:, k, :, None])[..., 0]
-        dv_n = dv_n - 0.5 * _cross(zeta, dv_n)
-        v_new = v + dv_n + (g_n - _cross(2.0 * w_ie + w_en, v_mid)) * dt
-        if height_fixed:
-            v_new[:, 2] = 0.0
-        C = np.swapaxes(rodrigues(zeta), -1, -2) @ C @ C_b[:, k]
-        if not position_fixed:
-            vm = 0.5 * (v + v_new)
-            h = h if height_fixed else h + vm[:, 2] * dt
-            lat = lat + vm[:, 1] / rmh * dt
-            lon = lon + vm[:, 0] / (rnh * np.cos(lat)) * dt
-        v_prev, v = v, v_new
-        if (k + 1) % record_every == 0:
-            j = (k + 1) // record_every - 1
-            out_C[:, j] = C
-            out_v[:, j] = v
-            out_p[:, j] = np.stack([lat, lon, h], -1)
-    C0[:] = 1.5 * C - 0.5 * C @ np.swapaxes(C, -1, -2) @ C  # first-order re-orthonormalisation
-    v0[:], lat0[:], lon0[:], h0[:], v_prev0[:] = v, lat, lon, h, v_prev
-    th_prev[:] = dtheta[:, -1]
-    dv_prev[:] = dvel[:, -1]

@@ -5,6 +5,7 @@ import re
 import numpy as np
 import pytest
 
+from fusionbench import coarse
 from fusionbench.coarse import CoarseAligner, InertialCoarseAligner
 from fusionbench.coarse_inertial import gravity_integral_inertial
 from fusionbench import attitude, earth, metrics, motion, trajectory as tj, units
@@ -12,6 +13,7 @@ from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
 from fusionbench.imudata import IMUData
 from tests.conftest import agree_to_rounding, load_fixture
+from tests.oracles.coarse import body_pass_numpy
 
 D = np.pi / 180
 
@@ -229,8 +231,8 @@ def test_a_constant_acceleration_is_a_tilt_but_at_0_1_g_the_specific_force_shows
 
 
 @pytest.mark.parametrize("case", ["sway", "moving", "rows"])
-def test_the_compiled_pass_gives_the_numpy_passs_attitudes(case):
-    """coarse-i0's compiled pass over the samples (default) against the NumPy reference, on seed 000's sway, on a
+def test_the_compiled_pass_gives_the_numpy_oracles_attitudes(case, monkeypatch):
+    """coarse-i0's compiled pass over the samples against its NumPy oracle (tests/oracles/coarse.py), on seed 000's sway, on a
     base accelerating with a reference and on a car's 1-Hz positions from an antenna on a lever arm (the integral of
     V and the attitude at the rows): the same attitudes to the rounding. Both passes round once per operation and
     sample in another order, so V differs by at most N eps |V| (|V| <= g T); the azimuth rests on the earth's turning
@@ -253,7 +255,10 @@ def test_the_compiled_pass_gives_the_numpy_passs_attitudes(case):
                                  T, runs=2, seed=3, grid=data.increments()[0]).window(-np.inf, T)
     site = Site(lat, 0.0, 0.0)
     fast = InertialCoarseAligner().align(data, site, vref=vref, aiding=aiding)
-    ref = InertialCoarseAligner(engine="numpy").align(data, site, vref=vref, aiding=aiding)
+    calls = []
+    monkeypatch.setattr(coarse, "body_pass", lambda *a: calls.append(body_pass_numpy(*a)))
+    ref = InertialCoarseAligner().align(data, site, vref=vref, aiding=aiding)
+    assert len(calls) == 1  # through the oracle
     np.testing.assert_array_equal(fast.t, ref.t)
     g = earth.gravity(lat)
     # N roundings of |V| <= g T, over the azimuth's sensitivity g W cosL (T/2)^2 / 2 (docstring): 3e-9 rad
@@ -264,7 +269,3 @@ def test_the_compiled_pass_gives_the_numpy_passs_attitudes(case):
     phi = metrics.misalignment_history(fast.C_bn[:, -1:], traj.truth(fast.t[-1:]).C_bn)
     assert np.abs(phi).max() < np.radians(1.0)  # and it aligned: within a degree of the truth
 
-
-def test_an_unknown_coarse_engine_is_refused_in_one_line():
-    with pytest.raises(ValueError, match=r"^coarse-i0: option engine: expected one of \('numba', 'numpy'\), found 'gpu'$"):
-        InertialCoarseAligner(engine="gpu")

@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
-from fusionbench import attitude, earth, trajectory as tj, units
+from fusionbench import attitude, earth, strapdown, trajectory as tj, units
 from fusionbench.imufiles import read_psins
 from fusionbench.strapdown import NavState, Strapdown
 from fusionbench.translation import Segment, Translation
 from tests.conftest import DATA, agree_to_rounding, load_fixture
+from tests.oracles.strapdown import integrate_numpy
 
 D = np.pi / 180
 LAT, LON, H = 34 * D, 108 * D, 450.0
@@ -97,16 +98,18 @@ def test_euler_rates_match_finite_differences_of_attitude():
     assert [W[2, 1], W[0, 2], W[1, 0]] == pytest.approx(w[0], abs=1e-8)
 
 
-def test_numba_and_numpy_engines_agree():
+def test_the_compiled_kernel_agrees_with_its_numpy_oracle(monkeypatch):
     rng = np.random.default_rng(3)
     th = rng.standard_normal((3, 400, 3)) * 1e-3
     dv = rng.standard_normal((3, 400, 3)) * 1e-2 + [0, 0, 0.098]
     cmd = rng.standard_normal((3, 400, 3)) * 1e-4
-    outs = []
-    for engine in ("numba", "numpy"):
-        sd = Strapdown(NavState.broadcast(3, np.eye(3), lat=0.6, h=100.0), 0.01, engine=engine)
+    outs, calls = [], []
+    for oracle in (False, True):
+        if oracle:
+            monkeypatch.setattr(strapdown, "_integrate_numba", lambda *a: calls.append(integrate_numpy(*a)))
+        sd = Strapdown(NavState.broadcast(3, np.eye(3), lat=0.6, h=100.0), 0.01)
         outs.append(sd.run(th, dv, omega_cmd=cmd, record_every=7))
-    # The engines round differently in each sample's attitude update: the two rotation matrices (NumPy's I + a K +
+    # The kernel and its oracle round differently in each sample's attitude update: the two rotation matrices (NumPy's I + a K +
     # b K K against the closed form: about 5 roundings an entry each) and the two 3x3 products (3 each, summed in
     # BLAS's order and with its fused multiply-adds): 16 roundings of |C| = 1 a sample, n samples in all. Every later
     # velocity increment is turned by that attitude, so the velocity differs by as many roundings of the sum of the
@@ -119,6 +122,7 @@ def test_numba_and_numpy_engines_agree():
     for key, size in (("C_bn", 1.0), ("v_n", moved), ("lat", 0.6 + moved * n * dt / earth.A),
                       ("lon", moved * n * dt / earth.A), ("h", 100.0 + moved * n * dt)):
         agree_to_rounding(outs[0][key], outs[1][key], 16 * n, size)
+    assert len(calls) == 1  # the second run went through the oracle
 
 
 def test_chunked_equals_one_piece():
@@ -131,7 +135,7 @@ def test_chunked_equals_one_piece():
     parts = [b.run(th[:, i:i + 70], dv[:, i:i + 70]) for i in range(0, 300, 70)]
     v = np.concatenate([p["v_n"] for p in parts], axis=1)
     # the same kernel, but each run ends re-orthonormalising the attitude, which moves it by its non-orthogonality
-    # so far: at most the attitude's roundings, 16 a sample (test_numba_and_numpy_engines_agree), turning every
+    # so far: at most the attitude's roundings, 16 a sample (test_the_compiled_kernel_agrees_with_its_numpy_oracle), turning every
     # later velocity increment by as much: 16 n roundings of the increments' summed sizes (1e-9 of them)
     n, dt = th.shape[1], 0.01
     agree_to_rounding(v, whole["v_n"], 16 * n, n * (np.abs(dv).max() + earth.gravity(0.6) * dt))
