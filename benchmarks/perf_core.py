@@ -9,9 +9,9 @@ Three measurements, all in one invocation (see ``benchmarks/README.md``):
 
 1. IMU generation (:func:`fusionbench.imu.simulate`), one batched call with ``runs=R`` against
    ``R`` calls with ``runs=1, first_run=k``; both must give identical arrays.
-2. Strapdown (:class:`fusionbench.strapdown.Strapdown`) over the same increments: numba engine
+2. Strapdown (:class:`fusionbench.strapdown.Strapdown`) over the same increments: the compiled kernel
    batched (one integrator, R runs, chunks of 6000 samples) against looped (R one-run
-   integrators), and the NumPy reference engine on a short slice (batched and looped).
+   integrators), and its NumPy oracle (``tests/oracles/strapdown.py``) on a short slice (batched and looped).
 3. Peak RSS of one long 100 Hz free-inertial run processed chunk by chunk
    (:func:`fusionbench.imu.simulate_chunks` -> ``Strapdown.run``), in a child process started
    before the parent allocates anything, so its ``ru_maxrss`` is its own.
@@ -34,10 +34,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _long_run import DT, SEED, initial_state, run_long_child  # noqa: E402 (the benchmarks' folder on the path)
+from _oracle import numpy_oracles  # noqa: E402
 
 STRAPDOWN_CHUNK = 6000  # samples per Strapdown.run call
-NUMPY_SLICE = 3000  # samples integrated by the NumPy reference engine (batched)
-NUMPY_LOOPED_RUNS = 10  # runs integrated one by one by the NumPy engine
+NUMPY_SLICE = 3000  # samples integrated by the NumPy oracle (batched)
+NUMPY_LOOPED_RUNS = 10  # runs integrated one by one by the NumPy oracle
 NUMPY_LOOPED_SLICE = 300  # samples per run for the NumPy looped measurement
 
 
@@ -149,26 +150,28 @@ def bench_strapdown(data, duration, repeat):
 
     # numba batched: one integrator for all runs, fed chunk by chunk
     chunks = _split(g, a, chunk)
-    t_b, tb_all, out_b = timed(lambda: _feed(S.Strapdown(st, DT, engine="numba"), chunks, rec), repeat)
+    t_b, tb_all, out_b = timed(lambda: _feed(S.Strapdown(st, DT), chunks, rec), repeat)
     del chunks
     # numba looped: one integrator per run, same chunks (slices of one run are contiguous already)
     t_l, tl_all, out_l = timed(lambda: [
-        _feed(S.Strapdown(initial_state(tr, 1), DT, engine="numba"), _split(g[r:r + 1], a[r:r + 1], chunk), rec)
+        _feed(S.Strapdown(initial_state(tr, 1), DT), _split(g[r:r + 1], a[r:r + 1], chunk), rec)
         for r in range(runs)], repeat)
     diff_bl = max(float(np.max(np.abs(out_l[r]["C_bn"][0] - out_b["C_bn"][r]))) for r in range(runs))
 
-    # NumPy reference engine, batched, on the first NUMPY_SLICE samples
+    # the kernel's NumPy oracle (tests/oracles/strapdown.py), batched, on the first NUMPY_SLICE samples
     m = min(NUMPY_SLICE, n)
     head = _split(g[:, :m], a[:, :m], m)
-    t_np, _, out_np = timed(lambda: _feed(S.Strapdown(st, DT, engine="numpy"), head, rec))
-    ref = _feed(S.Strapdown(st, DT, engine="numba"), head, rec)
+    with numpy_oracles("strapdown"):
+        t_np, _, out_np = timed(lambda: _feed(S.Strapdown(st, DT), head, rec))
+    ref = _feed(S.Strapdown(st, DT), head, rec)
     diff_np = float(np.max(np.abs(out_np["C_bn"] - ref["C_bn"])))
 
-    # NumPy engine looped (a few runs, a few samples: it is the slow path batching exists for)
+    # the oracle looped (a few runs, a few samples: it is the slow path batching exists for)
     rl, ml = min(NUMPY_LOOPED_RUNS, runs), min(NUMPY_LOOPED_SLICE, n)
-    t_npl, _, _ = timed(lambda: [
-        S.Strapdown(initial_state(tr, 1), DT, engine="numpy").run(g[r:r + 1, :ml], a[r:r + 1, :ml], record_every=rec)
-        for r in range(rl)])
+    with numpy_oracles("strapdown"):
+        t_npl, _, _ = timed(lambda: [
+            S.Strapdown(initial_state(tr, 1), DT).run(g[r:r + 1, :ml], a[r:r + 1, :ml], record_every=rec)
+            for r in range(rl)])
 
     return {
         "runs": runs,

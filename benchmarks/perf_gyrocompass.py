@@ -6,6 +6,7 @@ Run from the repository root::
     python benchmarks/perf_gyrocompass.py --quick     # smoke test: 10 runs x 120 s, looped over 3 runs
     python benchmarks/perf_gyrocompass.py --profile   # also: cProfile of one batched and one one-run call
     python benchmarks/perf_gyrocompass.py --threads 1 # strapdown kernel on one numba thread
+    python benchmarks/perf_gyrocompass.py --numpy-oracles --profile   # the NumPy loops the kernels replaced
 
 The gyrocompass aligners, :class:`adrc.gyrocompass.ADRCGyrocompass` (``adrc``, control period 0.1 s, 10 Hz),
 its printed-parameter variant :class:`adrc.gyrocompass.ADRCPaper` (``adrc-paper``, 0.02 s, 50 Hz) and
@@ -27,6 +28,7 @@ A readable table goes to stdout, then, as the last line, one JSON object with th
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import json
 import os
@@ -35,6 +37,9 @@ import sys
 import time
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _oracle import numpy_oracles  # noqa: E402 (the benchmarks' folder on the path)
 
 DT = 0.01  # 100 Hz
 SEED = 0
@@ -180,7 +185,10 @@ _PARTS = [
     ("PID gain formulas (every step)", "gyrocompass.py", "level_gains"),
     ("PID gain formulas (every step)", "gyrocompass.py", "compass_gains"),
     ("PID gain formulas (every step)", "gyrocompass.py", "sigma_of"),
-    ("align itself: loop body (np.stack, history) and setup", "gyrocompass.py", "align"),
+    ("align itself: setup and the attitude from the histories", "gyrocompass.py", "align"),
+    ("the NumPy loop body (np.stack, history)", "adrc_gyrocompass.py", "run_numpy"),
+    ("the NumPy loop body (np.stack, history)", "pid_gyrocompass.py", "run_numpy"),
+    ("PID loop step (the oracle's PIDLoops.step)", "pid_gyrocompass.py", "step"),
 ]
 
 
@@ -262,6 +270,9 @@ def main(argv=None):
                    help="also profile (cProfile) one batched and one one-run call per method and print where "
                         "the time of a control step goes")
     p.add_argument("--repeat", type=int, default=3, help="repetitions of the batched call (best kept; default 3)")
+    p.add_argument("--numpy-oracles", action="store_true",
+                   help="run the control loops' NumPy oracles (tests/oracles/, the loops the compiled kernels "
+                        "replaced; the profile's breakdown describes them) instead of the kernels")
     p.add_argument("--threads", type=int, default=None,
                    help="numba threads for the strapdown kernel (numba.set_num_threads; default: numba's, the core count)")
     args = p.parse_args(argv)
@@ -280,10 +291,12 @@ def main(argv=None):
     tr, data, vref, init, site = workload(runs, duration)
     t_data = time.perf_counter() - t0
     meths = aligners()
-    res = {name: bench_method(al, tr, data, vref, init, site, looped, max(1, args.repeat)) for name, al in meths.items()}
-    prof = None
-    if args.profile:
-        prof = run_profiles(meths, data, vref, init, site, 90.0 if args.quick else 120.0, runs)
+    with numpy_oracles("adrc_gyrocompass", "pid_gyrocompass") if args.numpy_oracles else contextlib.nullcontext():
+        res = {name: bench_method(al, tr, data, vref, init, site, looped, max(1, args.repeat))
+               for name, al in meths.items()}
+        prof = None
+        if args.profile:
+            prof = run_profiles(meths, data, vref, init, site, 90.0 if args.quick else 120.0, runs)
     total = time.perf_counter() - t_all
     load1 = os.getloadavg()[0]
     try:
@@ -294,7 +307,7 @@ def main(argv=None):
     nproc = os.cpu_count()
     print(f"gyrocompass aligners, batched vs looped  ({'quick' if args.quick else 'full'}; {nproc} CPUs; "
           f"numpy {np.__version__}; numba {numba.__version__} ({numba.get_num_threads()} threads, {layer} layer); "
-          f"python {sys.version.split()[0]}; load average {load0:.2f} at start, {load1:.2f} at end)")
+          f"python {sys.version.split()[0]}{'; NumPy oracles of the loops' if args.numpy_oracles else ''}; load average {load0:.2f} at start, {load1:.2f} at end)")
     print(f"workload: seed-000 sway at {LAT_DEG:g} N (pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz), preset seed000, "
           f"{1 / DT:g} Hz, {runs} runs x {duration:g} s ({data.samples:,} samples); vref white {VREF_SIGMA} m/s; "
           f"init Euler platform angles {list(INIT_DEG)} deg; IMU + vref generation {t_data:.1f} s (not timed below)")

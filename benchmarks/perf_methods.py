@@ -4,7 +4,7 @@ Run from the repository root::
 
     python benchmarks/perf_methods.py           # full: 20 runs x 600 s at 100 Hz (7.5 min on 2 idle cores)
     python benchmarks/perf_methods.py --quick   # 5 runs x 120 s (about 30 s)
-    python benchmarks/perf_methods.py --engine numpy --methods adrc pid   # the compiled loops' NumPy reference
+    python benchmarks/perf_methods.py --numpy-oracles --methods adrc pid   # the compiled loops' NumPy oracles
 
 Workload: seed 000's (Zhou 2011, ADRC gyrocompass) Table-1 sway at 34 N (pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz
 about a -30 deg yaw, as ``perf_kalman.py``), navigation-grade IMU (preset ``navigation``), 100 Hz, ``simulate(...,
@@ -27,10 +27,10 @@ Figures (wall times in s, measured with ``time.perf_counter``):
   the batched wall (how much the batching saves). The looped pass is done for every method at ``--quick``
   and, at full size, only where the batched call took under ``--loop-limit`` s (20 by default).
 
-``--engine numba|numpy`` gives that ``engine`` option to the methods whose control loop is compiled (those whose
-``engine`` option defaults to ``"numba"``: ``adrc``, ``adrc-paper``, ``pid``, ``eso-td``, ``eso-td-paper``), so two
-invocations compare the compiled loop with its NumPy reference; the others run as registered (``engine`` is
-recorded per method: null where it does not apply).
+``--numpy-oracles`` runs the methods whose loop is compiled (``coarse-i0``, ``adrc``, ``adrc-paper``, ``pid``,
+``eso-td``, ``eso-td-paper``) with the NumPy oracle of that loop (``tests/oracles/``: the operation-for-operation
+reference the tests hold the kernel to) in its place, so two invocations compare the compiled loop with the NumPy
+loop it replaced; the others run as registered (``oracle`` is recorded per method: null where none was used).
 
 A table goes to stdout, then, as the last line, one JSON object with every figure.
 """
@@ -38,7 +38,7 @@ A table goes to stdout, then, as the last line, one JSON object with every figur
 from __future__ import annotations
 
 import argparse
-import inspect
+import contextlib
 import json
 import os
 import sys
@@ -50,6 +50,9 @@ from fusionbench import aligner, claims, trajectory
 from fusionbench.aligner import Site
 from fusionbench.imu import PRESETS, simulate
 from fusionbench.strapdown import NavState, Strapdown
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _oracle import oracle_patch, numpy_oracles  # noqa: E402 (the benchmarks' folder on the path)
 
 LAT, LON, H = np.radians(34.0), np.radians(108.0), 450.0
 DT = 0.01
@@ -88,11 +91,14 @@ def base_for(sup):
     return "static" if "static" in sup.bases else None
 
 
-def engine_options(cls, engine):
-    """``{"engine": engine}`` for a method whose control loop is compiled (its ``engine`` option defaults to
-    ``"numba"``), else ``{}`` (no engine given, or another kind of engine option: kf's filterpy)."""
-    param = inspect.signature(cls.__init__).parameters.get("engine")
-    return {"engine": engine} if engine and param is not None and param.default == "numba" else {}
+#: The oracles of the methods' compiled loops (``tests/oracles/<name>.py``); the strapdown's is perf_core.py's.
+METHOD_ORACLES = ("coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td")
+
+
+def oracle_for(cls):
+    """The name of the NumPy oracle that stands in for ``cls``'s compiled loop (its module calls the kernel the
+    oracle replaces), else None."""
+    return next((n for n in METHOD_ORACLES if oracle_patch(n)[0] == cls.__module__), None)
 
 
 def timed_align(method, data, site):
@@ -108,8 +114,8 @@ def main(argv=None):
                     help="at full size, run the looped pass only for methods whose batched call took under this, s")
     ap.add_argument("--repeat", type=int, default=3, help="repetitions of the floor's two timings (best kept)")
     ap.add_argument("--methods", nargs="*", help="only these registered methods (default: all)")
-    ap.add_argument("--engine", choices=("numba", "numpy"),
-                    help="engine of the methods whose control loop is compiled (default: theirs, numba)")
+    ap.add_argument("--numpy-oracles", action="store_true",
+                    help="run the methods whose loop is compiled with its NumPy oracle (tests/oracles/) instead")
     args = ap.parse_args(argv)
     runs, duration = (5, 120.0) if args.quick else (20, 600.0)
     run_s = runs * duration
@@ -134,7 +140,7 @@ def main(argv=None):
 
     out = {"quick": bool(args.quick), "runs": runs, "duration_s": duration, "rate_hz": 1 / DT, "cpus": os.cpu_count(),
            "loop_limit_s": None if args.quick else args.loop_limit,
-           "floor_repeat": args.repeat, "target_x_floor": TARGET, "floor": floors, "engine": args.engine,
+           "floor_repeat": args.repeat, "target_x_floor": TARGET, "floor": floors, "numpy_oracles": args.numpy_oracles,
            "methods": {}, "skipped": {}}
     names = args.methods or sorted(aligner.available_methods())
     for name in names:
@@ -145,22 +151,23 @@ def main(argv=None):
             out["skipped"][name] = "needs an initial attitude (navigator)" if sup.needs_init else "claims no base here"
             continue
         data = datas[base]
-        opts = engine_options(cls, args.engine)
-        warm = warmups[base]  # imports, numba compile or cache load: batched (2 runs, threaded) and one run
-        aligner.load_method(name, imu="navigation", **opts).align(warm, site)
-        aligner.load_method(name, imu="navigation", **opts).align(warm.select_runs([0]), site)
-        try:
-            t_b = timed_align(aligner.load_method(name, imu="navigation", **opts), data, site)
-        except ValueError as exc:  # a method's refusal (e.g. too short a record at --quick): said, not fatal
-            out["skipped"][name] = f"refused: {exc}"
-            continue
-        rec = {"base": base, "bases_claimed": list(sup.bases), "engine": opts.get("engine"), "batched_s": t_b,
-               "run_s_per_s": run_s / t_b,
-               "x_floor": t_b / floors[base]["floor_s"], "looped_s": None, "looped_over_batched": None}
-        if args.quick or t_b < args.loop_limit:
-            t_l = sum(timed_align(aligner.load_method(name, imu="navigation", **opts), data.select_runs([k]), site)
-                      for k in range(runs))
-            rec.update(looped_s=t_l, looped_over_batched=t_l / t_b)
+        oracle = oracle_for(cls) if args.numpy_oracles else None
+        with numpy_oracles(oracle) if oracle else contextlib.nullcontext():
+            warm = warmups[base]  # imports, numba compile or cache load: batched (2 runs, threaded) and one run
+            aligner.load_method(name, imu="navigation").align(warm, site)
+            aligner.load_method(name, imu="navigation").align(warm.select_runs([0]), site)
+            try:
+                t_b = timed_align(aligner.load_method(name, imu="navigation"), data, site)
+            except ValueError as exc:  # a method's refusal (e.g. too short a record at --quick): said, not fatal
+                out["skipped"][name] = f"refused: {exc}"
+                continue
+            rec = {"base": base, "bases_claimed": list(sup.bases), "oracle": oracle, "batched_s": t_b,
+                   "run_s_per_s": run_s / t_b,
+                   "x_floor": t_b / floors[base]["floor_s"], "looped_s": None, "looped_over_batched": None}
+            if args.quick or t_b < args.loop_limit:
+                t_l = sum(timed_align(aligner.load_method(name, imu="navigation"), data.select_runs([k]), site)
+                          for k in range(runs))
+                rec.update(looped_s=t_l, looped_over_batched=t_l / t_b)
         rec["within_target"] = rec["x_floor"] <= TARGET
         out["methods"][name] = rec
         print(f"  {name}: {t_b:.2f} s", file=sys.stderr, flush=True)
@@ -169,7 +176,7 @@ def main(argv=None):
 
     print(f"Method throughput, {runs} runs x {duration:g} s at 100 Hz, navigation IMU, 34 N "
           f"({os.cpu_count()} CPUs; load average {load0:.2f} at start, {out['loadavg_end']:.2f} at end)"
-          + (f"; engine {args.engine} where compiled" if args.engine else ""))
+          + ("; NumPy oracles in place of the compiled loops" if args.numpy_oracles else ""))
     print(f"{'floor':<15} {'base':<6} {'simulate s':>10} {'strapdown s':>11} {'floor s':>8} {'run-s per s':>12}")
     for base, f in floors.items():
         print(f"{'':<15} {base:<6} {f['simulate_s']:10.2f} {f['strapdown_s']:11.2f} {f['floor_s']:8.2f} "
