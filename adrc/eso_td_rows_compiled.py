@@ -5,6 +5,8 @@ them its own way). Frames and units as there: ENU, body RFU, m/s."""
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba
 import numpy as np
 
@@ -12,10 +14,45 @@ import numpy as np
 _POINT = 0
 
 
+RowArrays = namedtuple("RowArrays", "start kind k w lever value mark0 mark1 inv_T mark_start mark_k mark_w lever_arm "
+                                    "age offset tau2")
+RowArrays.__doc__ = """The arrays of an :class:`adrc.eso_td_rows.StepRows` that the compiled loop reads, by their
+names there (:func:`row_arrays`). n rows, ``steps`` ESO steps; int arrays are int64.
+
+Attributes
+----------
+start : ndarray of int, shape (steps + 1,)
+    The rows of step j are ``start[j]:start[j + 1]``.
+kind : ndarray of int, shape (n,)
+    :data:`adrc.eso_td_rows.POINT` (a velocity at a time) or ``INTERVAL`` (a position span's mean velocity).
+k, w : ndarray, shape (n,)
+    The sample within the step (int, 0 .. m - 1) whose interval holds the row's time, and the fraction of that
+    interval there, (0, 1].
+lever : ndarray of int, shape (n,)
+    1: a point row is the antenna's velocity (the lever-arm velocity is added); 0: at rest, or no lever arm.
+value : ndarray, shape (R, n, 2)
+    The row's velocity, east and north, m/s.
+mark0, mark1 : ndarray of int, shape (n,)
+    A position interval's first and last mark, -1 for a point.
+inv_T : ndarray, shape (n,)
+    1 / the interval's length, 1/s (0 for a point).
+mark_start, mark_k, mark_w : ndarray, shapes (steps + 1,), (n_marks,), (n_marks,)
+    The marks of step j are ``mark_start[j]:mark_start[j + 1]``, at sample ``mark_k`` (int) within the step,
+    fraction ``mark_w``.
+lever_arm : ndarray, shape (3,)
+    IMU to antenna, body RFU, m.
+age : ndarray, shape (n,)
+    From a position interval's mean time to its step's end, s (0 for a point).
+offset, tau2 : ndarray, shape (steps,)
+    Mean time of each step's rows less the step's mean sample end (samples); mean square spread of their times
+    about their mean (s^2).
+"""
+
+
 def row_arrays(rows):
-    """The arrays of a :class:`adrc.eso_td_rows.StepRows` that :func:`measure` reads, as one tuple."""
-    return (rows.start, rows.kind, rows.k, rows.w, rows.lever, rows.value, rows.mark0, rows.mark1, rows.inv_T,
-            rows.mark_start, rows.mark_k, rows.mark_w, rows.lever_arm, rows.age)
+    """The arrays of a :class:`adrc.eso_td_rows.StepRows` that the compiled loop reads, as a :class:`RowArrays`."""
+    return RowArrays(rows.start, rows.kind, rows.k, rows.w, rows.lever, rows.value, rows.mark0, rows.mark1, rows.inv_T,
+                     rows.mark_start, rows.mark_k, rows.mark_w, rows.lever_arm, rows.age, rows.offset, rows.tau2)
 
 
 @numba.njit(cache=True)
@@ -54,8 +91,8 @@ def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks,
 
     Parameters
     ----------
-    rw : tuple
-        :func:`row_arrays`.
+    rw : RowArrays
+        The rows (:func:`row_arrays`).
     out_C, out_v : ndarray, shapes (R, m, 3, 3), (R, m, 3)
         The strapdown's attitude and velocity after each of the step's samples.
     dth : ndarray, shape (R, m, 3)
@@ -75,7 +112,9 @@ def measure(r, j, rw, out_C, out_v, dth, cs, v_prev, reset_sum, F_int, P, marks,
     y, Fbar, e_last : ndarray, shapes (2,), (3,), (2,)
         Written: the unreset level velocity error, ``int f_n dt`` at the rows' times, the last row's error.
     """
-    start, kind, kk, ww, lever, value, mark0, mark1, inv_T, mark_start, mark_k, mark_w, lever_arm = rw[:13]
+    start, kind, kk, ww, lever, value = rw.start, rw.kind, rw.k, rw.w, rw.lever, rw.value
+    mark0, mark1, inv_T, lever_arm = rw.mark0, rw.mark1, rw.inv_T, rw.lever_arm
+    mark_start, mark_k, mark_w = rw.mark_start, rw.mark_k, rw.mark_w
     m = out_v.shape[1]
     I0, I1, cum, lv, e, F = np.empty(5), np.empty(5), np.zeros(5), np.empty(3), np.empty(2), np.empty(3)
     rt = np.empty(3)

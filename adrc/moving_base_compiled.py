@@ -3,15 +3,16 @@
 :func:`eso_td_steps` runs the ESO/TD steps of all the runs in one numba call: the strapdown over the step's samples
 (position free, height held), the measurement of the rows valid in the step (:func:`adrc.eso_td_rows_compiled.measure`)
 and the specific force (ENU, m/s^2) of the step, the ESO of eq. 6 on both level channels (a correction with rows, the
-prediction alone without), eqs. 7, 9 and 12 with the fst TD (``td="fst"``) or the least-squares TD and its copies of
-the ESO's filter (``td="ls"``), and the velocity reset at rows, on the estimator's own arrays
-(:class:`adrc.eso_td_estimator.ESOTDEstimator`). It stops at each attitude feedback (every ``feedback_every_s``, 10 s
-by default), which the estimator's NumPy code makes (:meth:`~adrc.eso_td_estimator.ESOTDEstimator.feedback`,
-:func:`run_compiled`); the reported attitude, the strapdown's turned by the estimate, is made from the histories in
-one NumPy call. Its NumPy oracle, ``tests/oracles/eso_td.py``, makes the same operations in the same order, a step at
-a time over the runs. NumPy's einsum sums products in its own order (:func:`_rotate_sum` follows it for the specific
-force on this machine's 4-lane vectors), and the lever-arm terms' sums of three products differ from it in the last
-bit, so the loop and its oracle agree to rounding (``tests/test_eso_td_aiding.py`` derives the tolerance).
+prediction alone without), eqs. 7, 9 and 12 with the fst TD (``td="fst"``) or the least-squares TD and its copies of the
+ESO's filter (``td="ls"``), and the velocity reset at rows, on the estimator's own arrays
+(:class:`adrc.eso_td_estimator.ESOTDEstimator`), passed as named groups (:mod:`adrc.eso_td_state`). It stops at each
+attitude feedback (every ``feedback_every_s``, 10 s by default), which the estimator's NumPy code makes
+(:meth:`~adrc.eso_td_estimator.ESOTDEstimator.feedback`, :func:`run_compiled`); the reported attitude, the strapdown's
+turned by the estimate, is made from the histories in one NumPy call. Its NumPy oracle, ``tests/oracles/eso_td.py``,
+makes the same operations in the same order, a step at a time over the runs. NumPy's einsum sums products in its own
+order (:func:`_rotate_sum` follows it for the specific force on this machine's 4-lane vectors), and the lever-arm terms'
+sums of three products differ from it in the last bit, so the loop and its oracle agree to rounding
+(``tests/test_eso_td_aiding.py`` derives the tolerance).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from fusionbench.strapdown_compiled import integrate_compiled
 
 from .eso_td_estimator import expanding_memory_gains
 from .eso_td_rows_compiled import measure, row_arrays
+from .eso_td_state import TD, ESOCopy, EstimatorArrays, ForceESO, Histories, LevelESO, LSFits, Observers, Setup
 from .primitives_compiled import eso2_step, fst_step
 
 _E2, _A, _W_IE = earth.E2, earth.A, earth.OMEGA_IE
@@ -58,8 +60,7 @@ def _ls_slope(S, r):
 
 
 @numba.njit(cache=True)
-def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, eso_f, eso_q, eso_x, td, ls, clock,
-                 times, rows_t, reset_sum, psi_fb, v_prev, P, marks, now, hist_Csd, hist_psi, hist_fb, hist_y):
+def eso_td_steps(sd_state, dth, dvel, rows, j0, j1, setup, obs, fits, est, hist):
     """ESO/TD steps ``j0`` to ``j1 - 1`` of all runs (module docstring), states updated in place.
 
     Parameters
@@ -68,52 +69,41 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
         ``Strapdown.compiled_state()`` (position free, height held).
     dth, dvel : ndarray, shape (steps, R, m, 3)
         Angle (rad) and velocity (m/s) increments, body frame, one block per step.
-    rw : tuple
-        The rows (:func:`adrc.eso_td_rows_compiled.row_arrays`).
-    ints : ndarray of int
-        ``is_ls`` (td="ls"), ``eso_ls`` (eso_start="ls"), ``td_from``, ``td_ready``, the steps per row ``n``.
-    consts : ndarray
-        ``h`` (s), ``dt`` (s), ``td_r`` (1/s^2), ``force_h1``, the fst TD's ``h1`` (s), the fit's forgetting factor.
-    gain_tab : ndarray, shape (2, N)
-        The expanding-memory gains beta1, beta2 of rows 0 .. N - 1 (the last one below the floors), or empty.
-    eso, eso_f : tuple
-        ``(z1, z2, beta1, beta2, floor1, floor2, alpha, delta, lin_div)`` of the level ESO (R, 2) and of its copy on
-        the specific force (R, 3; td="ls"): states, the gains' law (applied ``n`` times over at a step with rows),
-        floor gains, fal's exponent, zone and ``delta ** (1 - alpha)`` per channel.
-    eso_q, eso_x : tuple
-        ``(z1, z2)`` of the ESO's copies on the unit quadratic (2,) and on the regressor X (R,) (td="ls").
-    td : tuple
-        ``(x1, x2)`` of the fst TD on the specific force (R, 3), and of the fst TD on q (R,) (td="fst").
-    ls : tuple
-        td="ls": ``S`` (5, R) and ``origin`` (2, R) of the fit of eq. 12 and of p's drift; the integrals
-        ``ints`` (6, R): X_int, Xb_int, M_int, XX_int, s_jumps, X; the previous step's den_a, den_b, m (3, R);
-        ``F_int`` (R, 3).
-    clock, times : ndarray, shapes (3,), (3,)
-        :attr:`adrc.eso_td_estimator.ESOTDEstimator.clock` and ``times``.
-    rows_t : tuple
-        The steps' row time offsets (samples) and spreads (s^2) (:class:`adrc.eso_td_rows.StepRows`).
-    reset_sum, psi_fb, v_prev, P, marks : ndarray
-        Velocity resets so far (R, 2, m/s), attitude corrections fed back so far (R, 3, rad), the level velocity at
-        the step's start (R, 2, m/s), the position intervals' integrals (R, 5) and marks (R, n_marks, 8).
-    now : ndarray, shape (R, 12)
-        Written at each step: f_n (3, m/s^2), f_n' (3), W, sin L, cos L, L', the Coriolis coefficient, fE / fU (the
-        quantities :meth:`adrc.eso_td_estimator.ESOTDEstimator.feedback` reads).
-    hist_Csd, hist_psi, hist_fb, hist_y : ndarray
-        Written at each step j: the strapdown's attitude (R, steps, 3, 3), the estimate psi before any feedback
-        (R, steps, 3, rad), the corrections so far (R, >= steps, 3), the unreset velocity error (R, >= steps, 2; NaN
-        without rows).
+    rows : adrc.eso_td_rows_compiled.RowArrays
+        The rows of each step and their times (:func:`adrc.eso_td_rows_compiled.row_arrays`).
+    j0, j1 : int
+        The steps to make, ``j0 .. j1 - 1``.
+    setup : adrc.eso_td_state.Setup
+        The constants: which TD and gains, the steps, the TDs' factors, the fits' forgetting, the gain table.
+    obs : adrc.eso_td_state.Observers
+        The level ESO (eq. 6), its copies on the specific force, the unit quadratic and the regressor (td="ls"), the
+        fst TDs on the specific force and on q (td="fst"); the other TD's are dummies.
+    fits : adrc.eso_td_state.LSFits
+        td="ls": the fits of eq. 12 and of p's drift, eq. 12's integrals (dummies with td="fst").
+    est : adrc.eso_td_state.EstimatorArrays
+        The estimator's running arrays: the rows' clock and times, the resets, the corrections fed back, the level
+        velocity at the step's start, ``int f_n dt``, the position intervals' integrals and marks, and ``now``, what
+        :meth:`adrc.eso_td_estimator.ESOTDEstimator.feedback` reads of the step just made.
+    hist : adrc.eso_td_state.Histories
+        Written at each step j: the strapdown's attitude, psi before any feedback, the corrections so far, the
+        unreset velocity error (NaN without rows).
     """
     C0, v0, lat0, lon0, h0, vp0, thp, dvp = sd_state
-    is_ls, eso_ls, td_from, td_ready, sc = ints[0] == 1, ints[1] == 1, ints[2], ints[3], float(ints[4])
-    h, dt, td_r, force_h1, q_h1, forget = consts
-    z1, z2, b1, b2, fl1, fl2, alpha, delta, lin_div = eso
-    fz1, fz2, fb1, fb2, ffl1, ffl2 = eso_f[0], eso_f[1], eso_f[2], eso_f[3], eso_f[4], eso_f[5]
-    qz1, qz2 = eso_q
-    xz1, xz2 = eso_x
-    fx1, fx2, qx1, qx2 = td
-    S_ls, org_ls, S_p, org_p, acc, prev, F_int = ls
-    offset, tau2 = rows_t
-    start, age = rw[0], rw[13]
+    is_ls, eso_ls, td_from, td_ready = setup.td_is_ls, setup.eso_start_is_ls, setup.td_from, setup.td_ready
+    sc, gain_tab, forget = setup.steps_per_row, setup.gain_table, setup.forget
+    h, dt, td_r, force_h1, q_h1 = setup.h, setup.dt, setup.td_r, setup.force_h1, setup.q_h1
+    eso, eso_f = obs.eso, obs.eso_f
+    z1, z2, b1, b2, fl1, fl2 = eso.z1, eso.z2, eso.beta1, eso.beta2, eso.beta1_floor, eso.beta2_floor
+    alpha, delta, lin_div = eso.alpha, eso.delta, eso.lin_div
+    fz1, fz2, fb1, fb2, ffl1, ffl2 = eso_f.z1, eso_f.z2, eso_f.beta1, eso_f.beta2, eso_f.beta1_floor, eso_f.beta2_floor
+    qz1, qz2, xz1, xz2 = obs.eso_q.z1, obs.eso_q.z2, obs.eso_x.z1, obs.eso_x.z2
+    fx1, fx2, qx1, qx2 = obs.td_f.x1, obs.td_f.x2, obs.td_q.x1, obs.td_q.x2
+    S_ls, org_ls, S_p, org_p = fits.S_ls, fits.origin_ls, fits.S_p, fits.origin_p
+    X_int, Xb_int, M_int, XX_int, s_jumps = fits.X_int, fits.Xb_int, fits.M_int, fits.XX_int, fits.s_jumps
+    den_a_prev, den_b_prev, m_prev = fits.den_a_prev, fits.den_b_prev, fits.m_prev
+    clock, times, reset_sum, psi_fb, v_prev = est.clock, est.times, est.reset_sum, est.psi_fb, est.v_prev
+    F_int, P, marks, now = est.F_int, est.P, est.marks, est.now
+    start, age, offset, tau2 = rows.start, rows.age, rows.offset, rows.tau2
     runs, m = dth.shape[1], dth.shape[2]
     out_C, out_v, out_p = np.empty((runs, m, 3, 3)), np.empty((runs, m, 3)), np.empty((runs, m, 3))
     nocmd = np.zeros((runs, 0, 3))
@@ -170,18 +160,18 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
             W = _W_IE + lon_rate
             cor = (2.0 * _W_IE + lon_rate) * sl
             w_in[0], w_in[1], w_in[2] = -lat_rate, W * cl, W * sl  # omega_in^n
-            measure(r, j, rw, out_C, out_v, dth[j], cs, v_prev, reset_sum, F_int, P, marks, w_in, dt, y, Fbar, e_last)
+            measure(r, j, rows, out_C, out_v, dth[j], cs, v_prev, reset_sum, F_int, P, marks, w_in, dt, y, Fbar, e_last)
             for i in range(3):
                 F_int[r, i] += cs[m, i]
             if not started:  # no row yet: nothing to estimate
                 for c in range(2):
-                    hist_y[r, j, c], v_prev[r, c] = np.nan, v0[r, c]
+                    hist.y[r, j, c], v_prev[r, c] = np.nan, v0[r, c]
                 for i in range(3):
-                    hist_psi[r, j, i], hist_fb[r, j, i] = 0.0, psi_fb[r, i]
-                hist_Csd[r, j] = C0[r]
+                    hist.psi[r, j, i], hist.psi_fb[r, j, i] = 0.0, psi_fb[r, i]
+                hist.C_sd[r, j] = C0[r]
                 continue
             for c in range(2):
-                hist_y[r, j, c] = y[c] if upd else np.nan
+                hist.y[r, j, c] = y[c] if upd else np.nan
             if first:
                 z1[r, 0], z1[r, 1], z2[r, 0], z2[r, 1] = y[0], y[1], 0.0, 0.0
             for c in range(2):  # eq. 6
@@ -222,21 +212,21 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
                 m_known = W * sl * p - s * (W * cl * q + lat_rate * p)
                 den_a, den_b = W * cl, den0 - W * cl
                 if not first:
-                    acc[0, r] += 0.5 * h * (den_a + prev[0, r])
-                    acc[1, r] += 0.5 * h * (den_b + prev[1, r])
-                    acc[2, r] += 0.5 * h * (m_known + prev[2, r])
-                prev[0, r], prev[1, r], prev[2, r] = den_a, den_b, m_known
-                acc[3, r] += acc[0, r] * h
+                    X_int[r] += 0.5 * h * (den_a + den_a_prev[r])
+                    Xb_int[r] += 0.5 * h * (den_b + den_b_prev[r])
+                    M_int[r] += 0.5 * h * (m_known + m_prev[r])
+                den_a_prev[r], den_b_prev[r], m_prev[r] = den_a, den_b, m_known
+                XX_int[r] += X_int[r] * h
                 if first:
-                    xz1[r], xz2[r] = acc[3, r], acc[0, r]
+                    xz1[r], xz2[r] = XX_int[r], X_int[r]
                 if upd:
-                    xz1[r], xz2[r] = eso2_step(xz1[r], xz2[r], acc[3, r], h, b1[1] * sc, b2[1] * sc, 1.0, 1.0, 1.0)
+                    xz1[r], xz2[r] = eso2_step(xz1[r], xz2[r], XX_int[r], h, b1[1] * sc, b2[1] * sc, 1.0, 1.0, 1.0)
                 else:
                     xz1[r] = xz1[r] + h * xz2[r]
-                X = xz2[r] + acc[1, r] + s - acc[4, r]
-                acc[5, r] = X
+                X = xz2[r] + Xb_int[r] + s - s_jumps[r]
+                fits.X[r] = X
                 if j >= td_from and upd:  # a prediction adds nothing to the fits
-                    _ls_add(S_ls, org_ls, r, X, q - acc[2, r], forget, S_ls[0, r] == 0.0)
+                    _ls_add(S_ls, org_ls, r, X, q - M_int[r], forget, S_ls[0, r] == 0.0)
                     _ls_add(S_p, org_p, r, qz2[0], p, forget, S_p[0, r] == 0.0)
                 fitted = j >= td_ready and S_ls[0, r] > 0.0
                 psiU = -_ls_slope(S_ls, r) if fitted else 0.0
@@ -248,8 +238,8 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
                 psiN = p + n * psiU + (b1[0] / b2[0] - h - dt / 2.0 + late) * _ls_slope(S_p, r)
             else:
                 psiN = p + n * psiU
-            hist_psi[r, j, 0], hist_psi[r, j, 1], hist_psi[r, j, 2] = psiE, psiN, psiU
-            hist_Csd[r, j] = C0[r]
+            hist.psi[r, j, 0], hist.psi[r, j, 1], hist.psi[r, j, 2] = psiE, psiN, psiU
+            hist.C_sd[r, j] = C0[r]
             # what the feedback reads of this step
             for i in range(3):
                 now[r, i], now[r, 3 + i] = fn[i], fx2[r, i]
@@ -262,7 +252,7 @@ def eso_td_steps(sd_state, dth, dvel, rw, j0, j1, ints, consts, gain_tab, eso, e
                     reset_sum[r, c] += e_now
                 v_prev[r, c] = v0[r, c]
             for i in range(3):
-                hist_fb[r, j, i] = psi_fb[r, i]
+                hist.psi_fb[r, j, i] = psi_fb[r, i]
 
 
 def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
@@ -290,8 +280,10 @@ def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
             gain_tab and gain_tab[-1][0] <= est.b1_floor.min() and gain_tab[-1][1] <= est.b2_floor.min()):
         gain_tab.append(expanding_memory_gains(len(gain_tab), h, n))  # until below every floor (then the floors hold)
     gain_tab = np.array(gain_tab, dtype=float).reshape(-1, 2).T.copy()
-    ints = np.array([is_ls, eso_ls, getattr(est, "td_from", 0), getattr(est, "td_ready", 0), n], dtype=np.int64)
-    consts = np.array([h, est.dt, a.td_r, a.force_h1, est.h1, est.td_ls.forget if is_ls else 1.0], dtype=float)
+    setup = Setup(td_is_ls=is_ls, eso_start_is_ls=eso_ls, td_from=int(getattr(est, "td_from", 0)),
+                  td_ready=int(getattr(est, "td_ready", 0)), steps_per_row=float(n), h=float(h), dt=float(est.dt),
+                  td_r=float(a.td_r), force_h1=float(a.force_h1), q_h1=float(est.h1),
+                  forget=float(est.td_ls.forget) if is_ls else 1.0, gain_table=gain_tab)
     e = est.eso
     e.beta1, e.beta2 = e.beta1.copy(), e.beta2.copy()  # written in place (they may be the floors' own arrays)
     alpha, delta = (np.broadcast_to(x, (2,)).astype(float) for x in (e.alpha, e.delta))
@@ -299,30 +291,33 @@ def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
     zeros, fe = np.zeros, est.eso_f if is_ls else None
     if is_ls:
         fe.beta1, fe.beta2 = fe.beta1.copy(), fe.beta2.copy()
-        ls = (est.td_ls.S, zeros((2, R)), est.td_p.S, zeros((2, R)),
-              np.stack([est.X_int, est.Xb_int, est.M_int, est.XX_int, est.s_jumps, zeros(R)]), zeros((3, R)), est.F_int)
-        est.X_int, est.Xb_int, est.M_int, est.XX_int, est.s_jumps, est.X = ls[4]  # the object's arrays: rows of one
+        est.X = zeros(R)  # the fit's regressor, which the feedback reads
+        fits = LSFits(est.td_ls.S, zeros((2, R)), est.td_p.S, zeros((2, R)), est.X_int, est.Xb_int, est.M_int,
+                      est.XX_int, est.s_jumps, est.X, zeros(R), zeros(R), zeros(R))
     else:
-        ls = (zeros((5, R)), zeros((2, R)), zeros((5, R)), zeros((2, R)), zeros((6, R)), zeros((3, R)), est.F_int)
+        fits = LSFits(zeros((5, R)), zeros((2, R)), zeros((5, R)), zeros((2, R)), *(zeros(R) for _ in range(9)))
     hist_Csd, psi_pre, now = np.empty((R, steps, 3, 3)), np.empty((R, steps, 3)), np.empty((R, 12))
+    hist = Histories(hist_Csd, psi_pre, hist_fb, hist_y)
     feedbacks = set() if est.fb_from is None else set(range(est.fb_from, steps, est.fb_every))
-    rw, rows_t = row_arrays(est.rows), (est.rows.offset, est.rows.tau2)
+    rows = row_arrays(est.rows)
     j0 = 0
     for jf in sorted(feedbacks | {steps - 1}):
         # the observers' current arrays (a feedback replaces some), dummies for those of the other TD
-        eso = (e.z1, e.z2, e.beta1, e.beta2) + eso_consts
-        eso_f = (fe.z1, fe.z2, fe.beta1, fe.beta2, est.eso_f_b1, est.eso_f_b2) if is_ls else (
-            zeros((R, 3)), zeros((R, 3))) + (zeros(3),) * 4
-        eso_q = (est.eso_q.z1, est.eso_q.z2) if is_ls else (zeros(2), zeros(2))
-        eso_x = (est.eso_x.z1, est.eso_x.z2) if is_ls else (zeros(R), zeros(R))
-        td = (est.td_f.x1, est.td_f.x2) + ((zeros(R), zeros(R)) if is_ls else (est.td_q.x1, est.td_q.x2))
-        eso_td_steps(sd.compiled_state(), dth_b, dv_b, rw, j0, jf + 1, ints, consts, gain_tab, eso, eso_f, eso_q,
-                     eso_x, td, ls, est.clock, est.times, rows_t, est.reset_sum, est.psi_fb, est.v_prev, est.P,
-                     est.marks, now, hist_Csd, psi_pre, hist_fb, hist_y)
+        obs = Observers(
+            LevelESO(e.z1, e.z2, e.beta1, e.beta2, *eso_consts),
+            ForceESO(fe.z1, fe.z2, fe.beta1, fe.beta2, est.eso_f_b1, est.eso_f_b2) if is_ls else ForceESO(
+                zeros((R, 3)), zeros((R, 3)), *(zeros(3) for _ in range(4))),
+            ESOCopy(est.eso_q.z1, est.eso_q.z2) if is_ls else ESOCopy(zeros(2), zeros(2)),
+            ESOCopy(est.eso_x.z1, est.eso_x.z2) if is_ls else ESOCopy(zeros(R), zeros(R)),
+            TD(est.td_f.x1, est.td_f.x2),
+            TD(zeros(R), zeros(R)) if is_ls else TD(est.td_q.x1, est.td_q.x2))
+        arrays = EstimatorArrays(est.clock, est.times, est.reset_sum, est.psi_fb, est.v_prev, est.F_int, est.P,
+                                 est.marks, now)
+        eso_td_steps(sd.compiled_state(), dth_b, dv_b, rows, j0, jf + 1, setup, obs, fits, arrays, hist)
         hist_psi[:, j0:jf + 1] = psi_pre[:, j0:jf + 1]
         if jf in feedbacks and est.feedback_due(jf):
-            if is_ls and ls[0][0, 0] > 0:  # the fits have started: their origins
-                est.td_ls.origin, est.td_p.origin = tuple(ls[1]), tuple(ls[3])
+            if is_ls and fits.S_ls[0, 0] > 0:  # the fits have started: their origins
+                est.td_ls.origin, est.td_p.origin = tuple(fits.origin_ls), tuple(fits.origin_p)
             est._now = (now[:, 0:3].copy(), now[:, 3:6].copy()) + tuple(np.ascontiguousarray(now[:, 6:12].T))
             hist_psi[:, jf] = est.feedback(jf, psi_pre[:, jf], sd.state)
             hist_fb[:, jf] = est.psi_fb
