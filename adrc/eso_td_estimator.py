@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench.attitude import apply_misalignment, rotvec_to_dcm
+from fusionbench.simulation.attitude import apply_misalignment, rotvec_to_dcm
 
 from .ls_differentiator import LeastSquaresDifferentiator
 from .primitives import FSTTrackingDifferentiator, SecondOrderESO

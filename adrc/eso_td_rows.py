@@ -2,28 +2,29 @@
 
 :class:`adrc.moving_base.ESOTDAligner` steps its ESO every ``h`` seconds (``m`` IMU samples; step j covers the
 samples ``j m .. j m + m - 1``, i.e. valid times in ``(t_end[j m - 1], t_end[j m + m - 1]]``). Its measurement of a
-step is the mean, over the rows valid in the step (:attr:`fusionbench.aiding.Aiding.t_valid`), of the antenna's
-horizontal velocity error (east, north, m/s):
+step is the mean, over the rows valid in the step (:attr:`fusionbench.simulation.aiding.Aiding.t_valid`), of the
+antenna's horizontal velocity error (east, north, m/s):
 
 * **a velocity row**: the strapdown's velocity at the row's time, linear between the two sample ends that bracket
-  it (:func:`fusionbench.aiding_geometry.bracket`), plus the antenna's velocity relative to the IMU
-  ``C_bn (omega_nb^b x l)`` (:func:`fusionbench.aiding_geometry.lever_velocity`; the strapdown's attitude at the end
-  of the bracketing sample, the gyros' rate over it less ``C_bn^T omega_in^n``), less the row;
+  it (:func:`fusionbench.simulation.aiding_geometry.bracket`), plus the antenna's velocity relative to the IMU
+  ``C_bn (omega_nb^b x l)`` (:func:`fusionbench.simulation.aiding_geometry.lever_velocity`; the strapdown's attitude
+  at the end of the bracketing sample, the gyros' rate over it less ``C_bn^T omega_in^n``), less the row;
 * **a row at rest**: the strapdown's velocity there less the row's velocity (its zero, or a receiver's noisy zero;
   0 where it has none), no lever arm: the IMU itself is at rest;
 * **positions only** (no velocity row in the whole aiding): positions differenced over :data:`POSITION_SPAN_S`
-  (:func:`fusionbench.aiding_geometry.enu_offset`; a new span ends at every position row) give the antenna's mean
-  velocity over the span, against the strapdown's mean velocity over it (the difference of its integral at the two
-  ends, plus the change of the lever-arm offset ``C_bn l``, :func:`fusionbench.aiding_geometry.lever_offset`),
-  counted at the step in which the span's last position is valid: no row is read before its time of validity. A
-  mean velocity against a mean velocity has no error from the vehicle's jerk (a point velocity at the middle would
-  be off by ``v'' T^2 / 24``: 0.12 m/s over 1 s in which the acceleration steps by 1 m/s^2). Why 10 s rather than
-  consecutive rows (:meth:`fusionbench.aiding.Aiding.velocities_from_positions`): the ESO's second-order roll-off
-  passes a difference's white noise to the level angles up to the rows' Nyquist rate; on a car with turns, 1-Hz
-  positions of 0.5 m (2 m) left 0.5' (2') of level error differenced row to row, 0.15' (0.6') over 10 s and
-  0.1' (0.3') over 20 s, the azimuth within 20 %. The price: after an attitude feedback the spans that straddle it
-  are made consistent (:meth:`StepRows.turn_marks`) to first order, but 0.4 % of a fed-back azimuth correction
-  remains with 10-s spans (1.2 % with 20 s, 0.015 % row to row; measured, not explained).
+  (:func:`fusionbench.simulation.aiding_geometry.enu_offset`; a new span ends at every position row) give the
+  antenna's mean velocity over the span, against the strapdown's mean velocity over it (the difference of its integral
+  at the two ends, plus the change of the lever-arm offset ``C_bn l``,
+  :func:`fusionbench.simulation.aiding_geometry.lever_offset`), counted at the step in which the span's last position
+  is valid: no row is read before its time of validity. A mean velocity against a mean velocity has no error from the
+  vehicle's jerk (a point velocity at the middle would be off by ``v'' T^2 / 24``: 0.12 m/s over 1 s in which the
+  acceleration steps by 1 m/s^2). Why 10 s rather than consecutive rows
+  (:meth:`fusionbench.simulation.aiding.Aiding.velocities_from_positions`): the ESO's second-order roll-off passes a
+  difference's white noise to the level angles up to the rows' Nyquist rate; on a car with turns, 1-Hz positions of
+  0.5 m (2 m) left 0.5' (2') of level error differenced row to row, 0.15' (0.6') over 10 s and 0.1' (0.3') over 20 s,
+  the azimuth within 20 %. The price: after an attitude feedback the spans that straddle it are made consistent
+  (:meth:`StepRows.turn_marks`) to first order, but 0.4 % of a fed-back azimuth correction remains with 10-s spans
+  (1.2 % with 20 s, 0.015 % row to row; measured, not explained).
 
 The velocity errors enter the ESO *unreset* (the velocity resets so far added back, so the series stays continuous
 through the resets), and the last row of a step gives the reset (the strapdown's level velocity less that row's
@@ -51,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusionbench.aiding_geometry import bracket, enu_offset
+from fusionbench.simulation.aiding_geometry import bracket, enu_offset
 
 #: Kinds of measurement: a velocity (or at-rest) row at one time; the mean over a position interval.
 POINT, INTERVAL = 0, 1
@@ -61,7 +62,7 @@ POSITION_SPAN_S = 10.0
 
 @dataclass
 class StepRows:
-    """The measurements of each ESO step, built from an :class:`~fusionbench.aiding.Aiding` (:meth:`build`).
+    """The measurements of each ESO step, built from an :class:`~fusionbench.simulation.aiding.Aiding` (:meth:`build`).
 
     Measurements are sorted by the step they belong to: those of step j are ``start[j]:start[j + 1]``. Arrays of
     int are int64 (the compiled kernel reads them as they are: :func:`adrc.eso_td_rows_compiled.measure` makes a
@@ -135,7 +136,7 @@ class StepRows:
 
         Parameters
         ----------
-        aiding : fusionbench.aiding.Aiding or None
+        aiding : fusionbench.simulation.aiding.Aiding or None
             Rows for ``runs`` recordings (``Aiding.for_runs``), valid inside the record; None: a stationary or
             swaying base, i.e. rows at rest (zero velocity) at every sample end.
         t_end : ndarray, shape (M,)

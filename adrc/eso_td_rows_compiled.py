@@ -57,8 +57,8 @@ def row_arrays(rows):
 
 @numba.njit(cache=True)
 def _lever_velocity(C, w_ib, w_in, lever_arm, out):
-    """``C (omega_nb^b x l)`` (:func:`fusionbench.aiding_geometry.lever_velocity`) into ``out`` (3,), m/s, with
-    ``omega_nb^b = w_ib - C^T w_in`` (rad/s; ``C`` (3, 3) body to ENU, ``w_in`` ENU)."""
+    """``C (omega_nb^b x l)`` (:func:`fusionbench.simulation.aiding_geometry.lever_velocity`) into ``out`` (3,), m/s,
+    with ``omega_nb^b = w_ib - C^T w_in`` (rad/s; ``C`` (3, 3) body to ENU, ``w_in`` ENU)."""
     w0 = w_ib[0] - (C[0, 0] * w_in[0] + C[1, 0] * w_in[1] + C[2, 0] * w_in[2])
     w1 = w_ib[1] - (C[0, 1] * w_in[0] + C[1, 1] * w_in[1] + C[2, 1] * w_in[2])
     w2 = w_ib[2] - (C[0, 2] * w_in[0] + C[1, 2] * w_in[1] + C[2, 2] * w_in[2])
@@ -71,8 +71,8 @@ def _lever_velocity(C, w_ib, w_in, lever_arm, out):
 
 @numba.njit(cache=True)
 def _rate_at(dth, r, k, w, dt, out):
-    """:func:`fusionbench.aiding_geometry.rate_at` for one row of run r: the gyros' rate (rad/s) at the fraction w of
-    increment k of ``dth`` (R, m, 3), on the line through the two nearest increments' middles."""
+    """:func:`fusionbench.simulation.aiding_geometry.rate_at` for one row of run r: the gyros' rate (rad/s) at the
+    fraction w of increment k of ``dth`` (R, m, 3), on the line through the two nearest increments' middles."""
     m = dth.shape[1]
     if m == 1:
         for c in range(3):

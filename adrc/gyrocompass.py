@@ -10,7 +10,7 @@ are each closed by Han's ADRC (third-order ESO eq. 9, NLSEF eq. 11 with the sign
 see :func:`adrc.primitives.nlsef`). The TD (eq. 7) is not evaluated: its reference is zero and it
 starts at rest on it, so v1 = v2 = 0 for all time (fhan(0, 0) = 0) and the NLSEF sees -z1, -z2. The
 commanded rates turn the computed frame inside the shared strapdown
-(:class:`fusionbench.compass.CommandLoop`); no azimuth command is given while levelling.
+(:class:`fusionbench.methods.compass.CommandLoop`); no azimuth command is given while levelling.
 
 Why the printed gains pass the velocity disturbance into the levels
 -------------------------------------------------------------------
@@ -73,7 +73,7 @@ on average (125 s at most).
 Azimuth, beside the levelling:
 
 1. **one-shot**: from ``fit_from_s`` the level channels feed
-   :class:`fusionbench.compass.AzimuthFit`, the least-squares form of eq. 19 (the steady commands
+   :class:`fusionbench.methods.compass.AzimuthFit`, the least-squares form of eq. 19 (the steady commands
    are the curvature of the level velocity errors once the known commands are taken out, so the fit
    does not wait for the slow ESO to settle, and the level coupling terms come from the measured
    velocities); at ``shot_s`` its azimuth turns the reported attitude (eqs. 17-18).
@@ -95,12 +95,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from fusionbench.aligner import AlignmentResult, Site, variant
-from fusionbench.claims import Supports
-from fusionbench.aligner_base import AlignerBase, per_increment_velocity
-from fusionbench.imu import load_spec
-from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
-from fusionbench.strapdown import rodrigues
+from fusionbench.methods.aligner import AlignmentResult, Site, variant
+from fusionbench.methods.aligner_base import AlignerBase, per_increment_velocity
+from fusionbench.methods.claims import Supports
+from fusionbench.methods.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
+from fusionbench.simulation.imu import load_spec
+from fusionbench.simulation.strapdown import rodrigues
 
 from .gyrocompass_compiled import run_compiled
 
@@ -234,8 +234,8 @@ class ADRCGyrocompass(AlignerBase):
     refine : bool
         Keep refining after the shot (default); False keeps the shot's azimuth.
     imu : str, path or IMUSpec, optional
-        The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
-        rate (:func:`fusionbench.claims.check_azimuth_observable`); None: not checked.
+        The IMU (:func:`fusionbench.simulation.imu.load_spec`), used only to refuse when its gyro bias hides the earth
+        rate (:func:`fusionbench.methods.claims.check_azimuth_observable`); None: not checked.
     """
 
     positive_options = ("step_s", "h1", "c0", "c1", "delta", "eso_bandwidth", "shot_s")
@@ -277,7 +277,7 @@ class ADRCGyrocompass(AlignerBase):
         return {k: (defaults[k] if v is None else v) for k, v in self._given.items()}
 
     def events(self, init_given):
-        """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (eqs. 17-18)."""
+        """Stages for the figures (:mod:`fusionbench.reports.figures`), s: the azimuth shot (eqs. 17-18)."""
         return [(float(self.shot_s), "azimuth shot")]
 
     def _align(self, imu, site: Site, aiding, init) -> AlignmentResult:

@@ -2,12 +2,12 @@
 
 :func:`adrc_steps` runs every control step of all the runs in one numba call: the strapdown over the step's
 samples with the commands held and the velocity error against the reference
-(:func:`fusionbench.compass_compiled.command_step`), the ESO (eq. 9) and the NLSEF (eq. 11) of both level channels,
-and the azimuth fit's sums (:func:`fusionbench.compass_compiled.fit_step`). The fit is read (its 6x6 solve) every
-``every`` steps from ``fit_from`` (0.1 s) and at the shot, from the sums kept at those steps, in one batched NumPy
-call afterwards (:func:`run_compiled`); the method makes the attitude it reports from the histories. The operations
-are those of the NumPy oracle ``tests/oracles/adrc_gyrocompass.py`` (a loop over control steps on the primitives of
-:mod:`adrc.primitives`), in its order: the two give identical results (``tests/test_gyrocompass.py``).
+(:func:`fusionbench.methods.compass_compiled.command_step`), the ESO (eq. 9) and the NLSEF (eq. 11) of both level
+channels, and the azimuth fit's sums (:func:`fusionbench.methods.compass_compiled.fit_step`). The fit is read (its 6x6
+solve) every ``every`` steps from ``fit_from`` (0.1 s) and at the shot, from the sums kept at those steps, in one
+batched NumPy call afterwards (:func:`run_compiled`); the method makes the attitude it reports from the histories. The
+operations are those of the NumPy oracle ``tests/oracles/adrc_gyrocompass.py`` (a loop over control steps on the
+primitives of :mod:`adrc.primitives`), in its order: the two give identical results (``tests/test_gyrocompass.py``).
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusionbench.compass import fit_azimuth
-from fusionbench.compass_compiled import command_step, fit_step, loop_arrays, work_arrays
+from fusionbench.methods.compass import fit_azimuth
+from fusionbench.methods.compass_compiled import command_step, fit_step, loop_arrays, work_arrays
 
 from .primitives_compiled import eso3_step, nlsef
 
@@ -28,7 +28,8 @@ def adrc_steps(arrays, gains, b0, z, u, fit_from, record, hist_C, tilt, rec_t_su
     Parameters
     ----------
     arrays : tuple
-        The loop's strapdown and azimuth fit (:func:`fusionbench.compass_compiled.loop_arrays`), updated in place.
+        The loop's strapdown and azimuth fit (:func:`fusionbench.methods.compass_compiled.loop_arrays`), updated in
+        place.
     gains : ndarray, shape (9,)
         ``beta01, beta02, beta03, delta, delta ** 0.5, delta ** 0.75, r1, h1, c1``.
     b0 : ndarray, shape (2,)
@@ -79,10 +80,10 @@ def run_compiled(loop, fit, gains, b0, fit_from, shot_step, every, hist_C, hist_
 
     Parameters
     ----------
-    loop : fusionbench.compass.CommandLoop
+    loop : fusionbench.methods.compass.CommandLoop
         The loop (its strapdown is advanced in place; ``loop.omega_c`` is left at the last command, for
         ``loop.finish()``).
-    fit : fusionbench.compass.AzimuthFit
+    fit : fusionbench.methods.compass.AzimuthFit
         The azimuth fit (fed in place).
     gains : dict
         The step's gains (``ADRCGyrocompass.gains``) with ``delta`` and ``c1`` added.

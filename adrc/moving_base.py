@@ -2,7 +2,7 @@
 moving base", Control and Decision 22(2), 2007): moving base with a velocity or position reference, stationary or
 swaying base without one (method ``eso-td``; ``eso-td-paper`` with the printed parameters).
 
-The shared strapdown (:class:`fusionbench.strapdown.Strapdown`) starts from an initial attitude guess or an
+The shared strapdown (:class:`fusionbench.simulation.strapdown.Strapdown`) starts from an initial attitude guess or an
 inertial-frame coarse alignment; a second-order ESO per level velocity channel reads its level misalignment from the
 velocity error against the reference (zero without aiding: the base must be at rest, checked), eq. 12 its azimuth
 through a least-squares tracking differentiator (:class:`adrc.eso_td_estimator.ESOTDEstimator`), and the estimate is
@@ -21,14 +21,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench.aligner import AlignmentResult, Site, variant
-from fusionbench.claims import Supports
-from fusionbench.aligner_base import AlignerBase, coarse_then_fine
-from fusionbench.imu import load_spec
-from fusionbench.attitude import apply_misalignment
-from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.compass import MAX_LATITUDE_DEG
-from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.methods.aligner import AlignmentResult, Site, variant
+from fusionbench.methods.aligner_base import AlignerBase, coarse_then_fine
+from fusionbench.methods.claims import Supports
+from fusionbench.methods.coarse import InertialCoarseAligner
+from fusionbench.methods.compass import MAX_LATITUDE_DEG
+from fusionbench.simulation.attitude import apply_misalignment
+from fusionbench.simulation.imu import load_spec
+from fusionbench.simulation.strapdown import NavState, Strapdown
 
 from .eso_td_rows import StepRows
 from .eso_td_estimator import ESOTDEstimator, expanding_memory_gains
@@ -103,7 +103,7 @@ class ESOTDAligner(AlignerBase):
         Runs whose abs(psi_hat) exceeds this (deg) are not corrected at a feedback instant.
     coarse_s : float
         Without an initial attitude, the inertial-frame coarse alignment runs this long first, s (with the
-        aiding valid then, if any: :class:`fusionbench.coarse.InertialCoarseAligner`).
+        aiding valid then, if any: :class:`fusionbench.methods.coarse.InertialCoarseAligner`).
 
     Attributes
     ----------
@@ -208,7 +208,7 @@ class ESOTDAligner(AlignerBase):
         return tuple(2.0 * h if d is None else float(d) for d in self._delta)
 
     def events(self, init_given):
-        """Stages for the figures (:mod:`fusionbench.figures`): the hand-over from the own inertial-frame coarse
+        """Stages for the figures (:mod:`fusionbench.reports.figures`): the hand-over from the own inertial-frame coarse
         alignment at ``coarse_s`` (s), when no initial attitude is given."""
         return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
 
@@ -222,7 +222,7 @@ class ESOTDAligner(AlignerBase):
             Body RFU increments or rates.
         site : Site
             Position at the initial state.
-        aiding : fusionbench.aiding.Aiding, optional
+        aiding : fusionbench.simulation.aiding.Aiding, optional
             Velocity or position rows (ENU, m/s; lat, lon, h) of a moving base, read at their times of validity
             (:mod:`adrc.eso_td_rows`); None: a stationary or swaying base (zero velocity).
         init : ndarray, shape (R, 3, 3) or (3, 3), optional

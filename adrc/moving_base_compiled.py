@@ -20,9 +20,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.attitude import apply_misalignment
-from fusionbench.strapdown_compiled import integrate_compiled
+from fusionbench.simulation import earth
+from fusionbench.simulation.attitude import apply_misalignment
+from fusionbench.simulation.strapdown_compiled import integrate_compiled
 
 from .eso_td_estimator import expanding_memory_gains
 from .eso_td_rows_compiled import measure, row_arrays
@@ -264,7 +264,7 @@ def run_compiled(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):
     ----------
     est : adrc.eso_td_estimator.ESOTDEstimator
         The estimator, fresh (its states, and the rows' marks, are advanced in place).
-    sd : fusionbench.strapdown.Strapdown
+    sd : fusionbench.simulation.strapdown.Strapdown
         The strapdown (advanced in place).
     dth_b, dv_b : ndarray, shape (steps, R, m, 3)
         Increments (rad, m/s, body), one block per step.

@@ -21,14 +21,14 @@ import numpy as np
 
 from gtsam.symbol_shorthand import B
 
-from fusionbench.aligner import AlignmentResult, Site
-from fusionbench.claims import Supports
-from fusionbench.aligner_base import AlignerBase
-from fusionbench.attitude import orthonormalize
-from fusionbench.imu import load_spec
-from fusionbench.imudata import IMUData
+from fusionbench.methods.aligner import AlignmentResult, Site
+from fusionbench.methods.aligner_base import AlignerBase
+from fusionbench.methods.claims import Supports
+from fusionbench.simulation.attitude import orthonormalize
+from fusionbench.simulation.imu import load_spec
+from fusionbench.simulation.imudata import IMUData
 
-from fusionbench.coarse import InertialCoarseAligner
+from fusionbench.methods.coarse import InertialCoarseAligner
 from .graph_aiding import POSITION_SIGMA, build_problem, keyframe_states, motion_from_solution, recording_rows
 from .graph_model import VREF_SIGMA_FLOOR, _scalar_or_axes, noise_model
 from .graph_solve import GraphSolver
@@ -48,11 +48,11 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
     step_s : float
         The graph's step: the keyframe interval, s (default 1 s), rounded to a whole number of IMU samples.
     imu : str, path, IMUSpec or None
-        The sensor model (a preset name, an IMU spec TOML file or an IMUSpec, :func:`fusionbench.imu.load_spec`;
-        default the ``navigation`` preset) from which the white-noise densities, the bias priors and the bias
-        random walk come (:func:`noise_model`); its noise schedules are not used (a change of noise level is
-        what :class:`AdaptiveFactorGraphAligner` estimates). An IMU whose gyro bias hides the earth rate is
-        refused (:func:`fusionbench.claims.check_azimuth_observable`). None:
+        The sensor model (a preset name, an IMU spec TOML file or an IMUSpec,
+        :func:`fusionbench.simulation.imu.load_spec`; default the ``navigation`` preset) from which the white-noise
+        densities, the bias priors and the bias random walk come (:func:`noise_model`); its noise schedules are not
+        used (a change of noise level is what :class:`AdaptiveFactorGraphAligner` estimates). An IMU whose gyro bias
+        hides the earth rate is refused (:func:`fusionbench.methods.claims.check_azimuth_observable`). None:
         seed000's white noise, bias priors 0.1 deg/h and 100 ug, a constant bias. Its name is
         reported as the result's ``imu_model``.
     gyro_noise : float or (3,) float, optional
@@ -97,7 +97,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
     huber_k : float
         Huber threshold, in sigmas, of the robust variant.
     coarse : object, optional
-        Aligner used when ``init`` is None (default :class:`fusionbench.coarse.InertialCoarseAligner`,
+        Aligner used when ``init`` is None (default :class:`fusionbench.methods.coarse.InertialCoarseAligner`,
         which works on a swaying base).
     init_sigma_deg : float or (3,) float, optional
         Sigma of a prior on the attitude of ``init`` at the first keyframe, misalignment E, N, U, deg
@@ -183,8 +183,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
 
     def estimate_only(self):
         """This aligner without the marginal covariances (``marginals=False``): the same attitudes, a third
-        cheaper, for the runner's settling of a smoother (:func:`fusionbench.runner._prefix_settling`), which reads
-        only the final attitude of each prefix."""
+        cheaper, for the runner's settling of a smoother (:func:`fusionbench.bench.runner._prefix_settling`), which
+        reads only the final attitude of each prefix."""
         lean = copy.copy(self)
         lean.marginals = False
         return lean
@@ -199,7 +199,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
             R recordings, body frame RFU (increments or rates).
         site : Site
             Latitude (|lat| <= 89 deg), longitude, height.
-        aiding : fusionbench.aiding.Aiding, optional
+        aiding : fusionbench.simulation.aiding.Aiding, optional
             Velocity and/or position rows for the R recordings, each used at its time of validity with the lever
             arm (docs/methods/gtsam.md); a row without its own sigma has ``vref_sigma`` (velocity) or
             ``aiding_position_sigma`` (position). None: a fixed base (zero velocity at every increment end).
@@ -224,7 +224,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         Raises
         ------
         ValueError
-            Naming the field: beside the input policy of :class:`fusionbench.aligner_base.AlignerBase` (latitude
+            Naming the field: beside the input policy of :class:`fusionbench.methods.aligner_base.AlignerBase` (latitude
             beyond 89 deg, a record shorter than ``min_duration_s``, aiding outside the record, a bad ``init``,
             non-finite samples), a keyframe interval shorter than the sample interval.
         """
@@ -324,11 +324,11 @@ def __getattr__(name):
     """``baselines.factor_graph.AdaptiveFactorGraphAligner``, its home until the graph family was split: still
     importable from here, with a DeprecationWarning."""
     if name == "AdaptiveFactorGraphAligner":
+        import importlib
         import warnings
-
-        from .graph_adaptive import AdaptiveFactorGraphAligner
 
         warnings.warn("baselines.factor_graph.AdaptiveFactorGraphAligner moved to baselines.graph_adaptive",
                       DeprecationWarning, stacklevel=2)
-        return AdaptiveFactorGraphAligner
+        # looked up when the old name is used, not imported with this module: graph_adaptive builds on this one
+        return importlib.import_module("baselines.graph_adaptive").AdaptiveFactorGraphAligner
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

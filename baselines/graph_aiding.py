@@ -1,14 +1,14 @@
-"""The aiding in the factor graph (:mod:`baselines.factor_graph`): from a :class:`fusionbench.aiding.Aiding` to the
-graph's rows, the moving-base compensation of the preintegration, and the data of the tile factors
-(:mod:`baselines.graph_rows`) at the rows' times of validity.
+"""The aiding in the factor graph (:mod:`baselines.factor_graph`): from a
+:class:`fusionbench.simulation.aiding.Aiding` to the graph's rows, the moving-base compensation of the preintegration,
+and the data of the tile factors (:mod:`baselines.graph_rows`) at the rows' times of validity.
 
 * **Rows.** A velocity row measures the antenna's velocity at ``tau = t - delay``: ``v(tau) + C_bn(tau) (omega_nb^b x
-  l)`` (:func:`fusionbench.aiding_geometry.lever_velocity`); a row at rest measures the IMU's velocity, zero (or the
-  noisy zero it reports), with no lever arm. A position row measures the antenna at ``p(tau) + C_bn(tau) l``: its ENU
-  offset from the site (:func:`fusionbench.aiding_geometry.enu_offset`) put into the graph's coordinates, the integral
-  of the ENU velocity (:func:`path_offsets`). Each row weighs ``(sigma_ref / sigma_row)^2`` on each axis it measures
-  (its own sigma, else the method's), nothing on the others. Without aiding the base is fixed: a zero velocity at
-  every increment end.
+  l)`` (:func:`fusionbench.simulation.aiding_geometry.lever_velocity`); a row at rest measures the IMU's velocity,
+  zero (or the noisy zero it reports), with no lever arm. A position row measures the antenna at ``p(tau) + C_bn(tau)
+  l``: its ENU offset from the site (:func:`fusionbench.simulation.aiding_geometry.enu_offset`) put into the graph's
+  coordinates, the integral of the ENU velocity (:func:`path_offsets`). Each row weighs ``(sigma_ref / sigma_row)^2``
+  on each axis it measures (its own sigma, else the method's), nothing on the others. Without aiding the base is
+  fixed: a zero velocity at every increment end.
 * **Lever arm.** ``C_bn(tau) = R_k C_{b_k}^{b(tau)}`` with ``R_k`` the keyframe's attitude and the relative rotation
   from the gyros, so the lever terms ``C_{b_k}^{b(tau)} (omega_nb^b x l)`` and ``C_{b_k}^{b(tau)} l`` join the
   IMU's increments ``U`` of the tile factor and enter its attitude Jacobian exactly; only ``omega_nb^b = omega_ib^b
@@ -17,9 +17,9 @@ graph's rows, the moving-base compensation of the preintegration, and the data o
 * **Moving-base compensation** (:func:`motion`). The transport rate, the Coriolis acceleration of each sample,
   gravity along the path and gtsam's centrifugal term need the velocity at every sample and the position at the
   keyframes: the velocity rows interpolated linearly in time (or the positions differenced,
-  :meth:`fusionbench.aiding.Aiding.velocities_from_positions`, when no velocity of a moving base is measured),
-  integrated, and shifted onto the position rows when there are some. With rows at every increment end that is
-  the reference itself; otherwise, once solved, the compensation is redone from the solution's own velocity at
+  :meth:`fusionbench.simulation.aiding.Aiding.velocities_from_positions`, when no velocity of a moving base is
+  measured), integrated, and shifted onto the position rows when there are some. With rows at every increment end that
+  is the reference itself; otherwise, once solved, the compensation is redone from the solution's own velocity at
   every sample and position at every keyframe (:func:`motion_from_solution`), which bridges outages and the
   rows' noise.
 """
@@ -29,8 +29,8 @@ from __future__ import annotations
 import numpy as np
 from gtsam.symbol_shorthand import B, V, X
 
-from fusionbench import earth
-from fusionbench.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
+from fusionbench.simulation import earth
+from fusionbench.simulation.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
 
 from .graph_rows import (at_rows, axis_means, integral_at_rows, mean_at_rows, row_rotations, tile_increments,
                          tile_scatter, tile_sums, tiles)
@@ -48,13 +48,13 @@ def recording_rows(aiding, r, t_end, site, vref_sigma, position_sigma):
 
     Parameters
     ----------
-    aiding : fusionbench.aiding.Aiding or None
+    aiding : fusionbench.simulation.aiding.Aiding or None
         Rows for all recordings (arrays (R, K, 3)); None: a fixed base.
     r : int
         The recording.
     t_end : ndarray, shape (M,)
         The increment ends, s.
-    site : fusionbench.aligner.Site
+    site : fusionbench.methods.aligner.Site
         The origin of the positions.
     vref_sigma, position_sigma : float
         Standard deviation of a velocity row (m/s) and of a position row (m) without their own: the unit weights.
@@ -147,7 +147,7 @@ def build_problem(rows, site, t_end, t_kf, counts, dt, dtheta, dvel, C0=None, di
     ----------
     rows : dict
         The recording's rows (:func:`recording_rows`).
-    site : fusionbench.aligner.Site
+    site : fusionbench.methods.aligner.Site
     t_end : ndarray, shape (M,)
         Increment ends, s.
     t_kf : ndarray, shape (K,)
@@ -297,8 +297,9 @@ def _with_motion(problem, v, p_kf, site):
 
 
 def path_offsets(v, p0, dt, site):
-    """The graph's positions less the ENU offsets from the site (:func:`fusionbench.aiding_geometry.enu_offset`) along a
-    path, (M + 1, 3), m, at the record's start and its increment ends.
+    """The graph's positions less the ENU offsets from the site
+    (:func:`fusionbench.simulation.aiding_geometry.enu_offset`) along a path, (M + 1, 3), m, at the record's start and
+    its increment ends.
 
     The graph's position is the integral of the ENU velocity ``v`` (M, 3), m/s (at the increment ends, ``dt`` s
     apart), from ``p0`` (3,) m; an ENU offset is a function of latitude, longitude and height, whose rates are

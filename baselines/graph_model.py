@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import units
-from fusionbench.imu import IMUSpec
+from fusionbench.simulation import units
+from fusionbench.simulation.imu import IMUSpec
 
 #: Smallest reference noise used, m/s: an exact reference still gives well-conditioned velocity factors.
 VREF_SIGMA_FLOOR = 1e-3
@@ -26,7 +26,8 @@ ACCEL_NOISE = 6.0 * units.UG_PER_SQRT_HZ        # m/s/sqrt(s)
 GYRO_BIAS_SIGMA = 0.1 * units.DEG_PER_H         # rad/s, 10 x seed000's 0.01 deg/h
 ACCEL_BIAS_SIGMA = 100.0 * units.UG             # m/s^2, above seed000's 30 ug
 #: Floors of the white-noise densities taken from an IMUSpec: a zero datasheet figure would make the preintegrated
-#: covariance singular. (The bias priors' floors are the IMU model's: :meth:`fusionbench.imu.IMUSpec.bias_prior_sigma`.)
+#: covariance singular. (The bias priors' floors are the IMU model's:
+#: :meth:`fusionbench.simulation.imu.IMUSpec.bias_prior_sigma`.)
 GYRO_NOISE_FLOOR = 1e-5 * units.DEG_PER_SQRT_H
 ACCEL_NOISE_FLOOR = 0.1 * units.UG_PER_SQRT_HZ
 
@@ -47,7 +48,7 @@ def noise_model(spec):
         floored); ``gyro_bias_sigma`` (3,) rad/s and ``accel_bias_sigma`` (3,) m/s^2: the zero-mean
         bias priors, ``sqrt(bias^2 + bias_sigma^2 + instability^2)`` per axis (the fixed bias is a
         figure whose sign the estimator does not know, so it counts as a spread), floored
-        (:meth:`fusionbench.imu.IMUSpec.bias_prior_sigma`);
+        (:meth:`fusionbench.simulation.imu.IMUSpec.bias_prior_sigma`);
         ``gyro_bias_walk`` (3,) rad/s/sqrt(s) and ``accel_bias_walk`` (3,) m/s^2/sqrt(s): the
         bias's random walk, ``sqrt(random_walk^2 + 2 instability^2 / tau)`` (the Kalman aligner's
         process noise; zero for a constant bias); ``name``, the model's name.
@@ -57,7 +58,7 @@ def noise_model(spec):
                 "gyro_bias_sigma": np.full(3, GYRO_BIAS_SIGMA), "accel_bias_sigma": np.full(3, ACCEL_BIAS_SIGMA),
                 "gyro_bias_walk": np.zeros(3), "accel_bias_walk": np.zeros(3), "name": "default"}
     if not isinstance(spec, IMUSpec):
-        raise ValueError(f"imu: expected a fusionbench.imu.IMUSpec or None, found {type(spec).__name__}")
+        raise ValueError(f"imu: expected a fusionbench.simulation.imu.IMUSpec or None, found {type(spec).__name__}")
     out = {"name": spec.name}
     for sensor, e, noise_floor in (("gyro", spec.gyro, GYRO_NOISE_FLOOR), ("accel", spec.accel, ACCEL_NOISE_FLOOR)):
         out[f"{sensor}_noise"] = np.maximum(np.asarray(e.white), noise_floor)

@@ -3,11 +3,11 @@ samples nearest each keyframe), what the IMU predicts at a row's time from its k
 integrated, a row between two samples reading the partial sample interpolated), the weighted means of a tile's rows
 per axis, their scatter, and the tile factor that compares the means with the prediction.
 
-A row valid at ``tau`` lies in sample ``j`` (``(t_end[j-1], t_end[j]]``, :func:`fusionbench.aiding_geometry.bracket`)
-at the fraction ``w`` of it, and belongs to the tile of that sample. A quantity known at the sample ends as a sum ``S``
-(:func:`tile_sums`) of per-sample increments ``x`` from the keyframe is ``S[j] - (1 - w) x[j]`` at the row
-(:func:`at_rows`; linear within the sample), and its integral from the keyframe to the row follows from the same
-straight lines (:func:`integral_at_rows`).
+A row valid at ``tau`` lies in sample ``j`` (``(t_end[j-1], t_end[j]]``,
+:func:`fusionbench.simulation.aiding_geometry.bracket`) at the fraction ``w`` of it, and belongs to the tile of that
+sample. A quantity known at the sample ends as a sum ``S`` (:func:`tile_sums`) of per-sample increments ``x`` from the
+keyframe is ``S[j] - (1 - w) x[j]`` at the row (:func:`at_rows`; linear within the sample), and its integral from the
+keyframe to the row follows from the same straight lines (:func:`integral_at_rows`).
 
 The tile factor of keyframe ``k`` holds, per ENU axis ``a``, the weighted mean of its rows' equations
 ``c_t t + c_v,a v + (R (U_a - Mb_a b_a))_a = z_a`` on the pose (attitude ``R = C_bn``, translation ``t``), velocity
@@ -26,7 +26,7 @@ import numpy as np
 
 import gtsam
 
-from fusionbench.strapdown import rodrigues
+from fusionbench.simulation.strapdown import rodrigues
 
 
 def tiles(t, t_kf):

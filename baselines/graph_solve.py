@@ -12,7 +12,7 @@ import numpy as np
 import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
-from fusionbench.attitude import dcm_to_rotvec
+from fusionbench.simulation.attitude import dcm_to_rotvec
 
 from .graph_aiding import tile_data
 from .graph_build import GraphBuilder

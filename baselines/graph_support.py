@@ -14,13 +14,13 @@ import numpy as np
 import gtsam
 from gtsam.symbol_shorthand import B, V, X
 
-from fusionbench.attitude import dcm_to_rotvec, orthonormalize, rotvec_to_dcm, skew
-from fusionbench.strapdown import coning_sculling, rodrigues
+from fusionbench.simulation.attitude import dcm_to_rotvec, orthonormalize, rotvec_to_dcm, skew
+from fusionbench.simulation.strapdown import coning_sculling, rodrigues
 
 
 def compensated_increments(dtheta, dvel):
     """Coning- and sculling-compensated increments of one recording
-    (:func:`fusionbench.strapdown.coning_sculling` from rest: no sample before the first).
+    (:func:`fusionbench.simulation.strapdown.coning_sculling` from rest: no sample before the first).
 
     Parameters
     ----------

@@ -29,7 +29,7 @@ Stages (all times configurable):
    PSINS-style schedule from exactly 180 deg under seed 000's (Zhou 2011, ADRC gyrocompass) sway did not settle in 600
    s). The level loops, however, settle at any azimuth with steady commands that hold sin(az) and cos(az)
    (eq. 19 of seed 000). From ``fit_from_s`` the least-squares form of eq. 19
-   (:class:`fusionbench.compass.AzimuthFit`) reads them, and at ``shot_s`` the attitude is turned
+   (:class:`fusionbench.methods.compass.AzimuthFit`) reads them, and at ``shot_s`` the attitude is turned
    once by the azimuth found; the level integrators are shifted by the known change of the
    earth-rate terms. Turning the computed frame flips its level errors, so the fast level loops
    run on for a while before the compass loop starts: the compass loop reads any level transient
@@ -47,12 +47,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.aligner import AlignmentResult, Site
-from fusionbench.claims import Supports
-from fusionbench.aligner_base import AlignerBase, per_increment_velocity
-from fusionbench.imu import load_spec
-from fusionbench.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
+from fusionbench.methods.aligner import AlignmentResult, Site
+from fusionbench.methods.aligner_base import AlignerBase, per_increment_velocity
+from fusionbench.methods.claims import Supports
+from fusionbench.methods.compass import MAX_LATITUDE_DEG, AzimuthFit, CommandLoop, correct_azimuth
+from fusionbench.simulation import earth
+from fusionbench.simulation.imu import load_spec
 
 from .gyrocompass_compiled import run_compiled
 
@@ -129,8 +129,9 @@ class PIDLoops:
 
     def shot(self, loop, fit):
         """The one-shot azimuth correction (eqs. 17-18): turn the attitude of ``loop``
-        (:class:`fusionbench.compass.CommandLoop`) by the azimuth of ``fit`` (:class:`fusionbench.compass.AzimuthFit`)
-        and shift the level integrators (:meth:`frame_turned`); returns that azimuth (R,), rad."""
+        (:class:`fusionbench.methods.compass.CommandLoop`) by the azimuth of ``fit``
+        (:class:`fusionbench.methods.compass.AzimuthFit`) and shift the level integrators (:meth:`frame_turned`);
+        returns that azimuth (R,), rad."""
         az = fit.azimuth()
         loop.sd.state.C_bn[:] = correct_azimuth(loop.sd.state.C_bn, az)
         self.frame_turned(az)
@@ -166,8 +167,8 @@ class PIDGyrocompass(AlignerBase):
         defaults' azimuth pairs (130, 333, 800 s) leave the azimuth noise of PSINS's double pairs at 100, 250
         and 600 s.
     imu : str, path or IMUSpec, optional
-        The IMU (:func:`fusionbench.imu.load_spec`), used only to refuse when its gyro bias hides the earth
-        rate (:func:`fusionbench.claims.check_azimuth_observable`); None: not checked.
+        The IMU (:func:`fusionbench.simulation.imu.load_spec`), used only to refuse when its gyro bias hides the earth
+        rate (:func:`fusionbench.methods.claims.check_azimuth_observable`); None: not checked.
     """
 
     positive_options = ("step_s", "shot_s", "level_td_s")
@@ -194,7 +195,7 @@ class PIDGyrocompass(AlignerBase):
                              f"found {compass_stages}")
 
     def events(self, init_given):
-        """Stages for the figures (:mod:`fusionbench.figures`), s: the azimuth shot (the attitude turned by the
+        """Stages for the figures (:mod:`fusionbench.reports.figures`), s: the azimuth shot (the attitude turned by the
         fitted azimuth) and the closing of the compass loop."""
         return [(float(self.shot_s), "azimuth shot"), (self.compass_stages[0][0], "compass loop closed")]
 

@@ -2,12 +2,13 @@
 
 :func:`pid_steps` runs the control steps of all the runs in one numba call: the strapdown over the step's samples
 with the commands held and the velocity error against the reference
-(:func:`fusionbench.compass_compiled.command_step`), the azimuth fit's sums until the shot
-(:func:`fusionbench.compass_compiled.fit_step`), and the staged level and compass loops with their velocity damping,
-on the states of :class:`baselines.gyrocompass.PIDLoops` (that object's own arrays). It stops at the shot (once per
-run), where the NumPy code turns the attitude by the fitted azimuth (:meth:`baselines.gyrocompass.PIDLoops.shot`,
-from :func:`run_compiled`), and goes on from there. The operations are those of the NumPy oracle
-``tests/oracles/pid_gyrocompass.py``, in its order: the two give identical results (``tests/test_gyrocompass.py``).
+(:func:`fusionbench.methods.compass_compiled.command_step`), the azimuth fit's sums until the shot
+(:func:`fusionbench.methods.compass_compiled.fit_step`), and the staged level and compass loops with their velocity
+damping, on the states of :class:`baselines.gyrocompass.PIDLoops` (that object's own arrays). It stops at the shot
+(once per run), where the NumPy code turns the attitude by the fitted azimuth
+(:meth:`baselines.gyrocompass.PIDLoops.shot`, from :func:`run_compiled`), and goes on from there. The operations are
+those of the NumPy oracle ``tests/oracles/pid_gyrocompass.py``, in its order: the two give identical results
+(``tests/test_gyrocompass.py``).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusionbench.compass_compiled import command_step, fit_step, loop_arrays, velocity_error, work_arrays
+from fusionbench.methods.compass_compiled import command_step, fit_step, loop_arrays, velocity_error, work_arrays
 
 
 @numba.njit(cache=True)
@@ -26,7 +27,8 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
     Parameters
     ----------
     arrays : tuple
-        The loop's strapdown and azimuth fit (:func:`fusionbench.compass_compiled.loop_arrays`), updated in place.
+        The loop's strapdown and azimuth fit (:func:`fusionbench.methods.compass_compiled.loop_arrays`), updated in
+        place.
     j0 : int
         First step.
     resume : bool
@@ -98,9 +100,9 @@ def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist
     Parameters
     ----------
     loop, fit, loops : CommandLoop, AzimuthFit, PIDLoops
-        The strapdown loop (:mod:`fusionbench.compass`), the azimuth fit it feeds until the shot, and the level and
-        compass loops (:class:`baselines.gyrocompass.PIDLoops`), all advanced in place; ``loop.omega_c`` is left at
-        the last command, for ``loop.finish()``.
+        The strapdown loop (:mod:`fusionbench.methods.compass`), the azimuth fit it feeds until the shot, and the
+        level and compass loops (:class:`baselines.gyrocompass.PIDLoops`), all advanced in place; ``loop.omega_c`` is
+        left at the last command, for ``loop.finish()``.
     fit_from, shot_step : int
         First step of the fit; step of the shot.
     stage_steps : list of int

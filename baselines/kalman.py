@@ -16,7 +16,7 @@ positions differenced, the lever arm's term removed), its initial covariance as 
 the hand-over on.
 
 Stationary-base limits: the filter cannot separate the horizontal accelerometer biases from tilt nor
-the east gyro bias from azimuth, so it lands on :func:`fusionbench.metrics.theoretical_limits`.
+the east gyro bias from azimuth, so it lands on :func:`fusionbench.scoring.metrics.theoretical_limits`.
 
 :class:`AdaptiveKalmanAligner` (``akf``) adds innovation-based adaptation for noise that changes:
 Sage-Husa estimation of R with a fading factor, and covariance matching of the innovations to inflate
@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench.aligner import AlignmentResult, Site
-from fusionbench.aligner_base import AlignerBase, coarse_then_fine
-from fusionbench.claims import Supports, azimuth_bias_ratio
-from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.imu import load_spec
-from fusionbench.init_check import COARSE_NOISE_DEG, coarse_error_deg
-from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.methods.aligner import AlignmentResult, Site
+from fusionbench.methods.aligner_base import AlignerBase, coarse_then_fine
+from fusionbench.methods.claims import Supports, azimuth_bias_ratio
+from fusionbench.methods.coarse import InertialCoarseAligner
+from fusionbench.methods.init_check import COARSE_NOISE_DEG, coarse_error_deg
+from fusionbench.simulation.imu import load_spec
+from fusionbench.simulation.strapdown import NavState, Strapdown
 
 from .filter_bank import ENGINES, FilterBank
 from .kalman_aiding import CHANNELS, attitude_at_start, initial_motion, prepare_rows, zero_velocity_rows
@@ -58,7 +58,7 @@ class KalmanAligner(AlignerBase):
         Filter step, s (0.1: 10 Hz), rounded to a whole number of IMU samples: the interval of its predictions
         and updates.
     imu : str, path or IMUSpec
-        Noise model of the filter (:func:`fusionbench.imu.load_spec`): a preset name, an IMU spec TOML
+        Noise model of the filter (:func:`fusionbench.simulation.imu.load_spec`): a preset name, an IMU spec TOML
         file or an IMUSpec; default the ``navigation`` preset. Its white noises give Q; its bias sigmas
         (fixed part taken as a sigma too) the initial bias covariance, floored so that the prior is never
         tight (a tight gyro-bias prior biases the tilt). The result's ``imu_model`` names it.
@@ -66,7 +66,7 @@ class KalmanAligner(AlignerBase):
         Standard deviation of each velocity row that has none of its own (east and north), m/s, and of the zero
         velocity of a fixed base without aiding (every sigma floored at 1 mm/s, so that an exact reference keeps
         the update well conditioned). A scenario gives a method with this option the noise of its reference
-        (:func:`fusionbench.aligner.load_method`); 0.05 m/s by default, the disturbance of a vehicle at rest.
+        (:func:`fusionbench.methods.aligner.load_method`); 0.05 m/s by default, the disturbance of a vehicle at rest.
     att_sigma_deg : (3,) float
         Initial misalignment standard deviations [E, N, U] after the initialisation, deg. ``None`` for U (the
         default): 5 deg, or three times the azimuth error the IMU model's gyro bias allows at the site
@@ -122,7 +122,7 @@ class KalmanAligner(AlignerBase):
         self.min_duration_s = self.coarse_s + 10.0
 
     def events(self, init_given):
-        """Stages for the figures (:mod:`fusionbench.figures`): the hand-over from the own coarse alignment at
+        """Stages for the figures (:mod:`fusionbench.reports.figures`): the hand-over from the own coarse alignment at
         ``coarse_s`` (s), when no initial attitude is given."""
         return [] if init_given else [(self.coarse_s, "coarse -> fine hand-over")]
 
@@ -173,10 +173,10 @@ class KalmanAligner(AlignerBase):
         start; on a fixed base its first attitude carried the coarse stage's level (27 arcmin RMS, navigation grade,
         60 s) and a prior-sized sigma, and seed 000's case settled in 136 s (74 s from the start). On a fixed base it
         does so only when the coarse azimuth is within the filter's linear range: the error the IMU model allows the
-        coarse stage (:func:`fusionbench.init_check.coarse_error_deg` less its allowance for sway and rows) within
-        :data:`RERUN_MAX_DEG`; beyond it the record's first minute, filtered from degrees off, cost more than it gave
-        (a tactical IMU under seed 000's sway at the equator, 20 runs: 0.77 attainable bounds from the start, 0.68
-        from the hand-over)."""
+        coarse stage (:func:`fusionbench.methods.init_check.coarse_error_deg` less its allowance for sway and rows)
+        within :data:`RERUN_MAX_DEG`; beyond it the record's first minute, filtered from degrees off, cost more than
+        it gave (a tactical IMU under seed 000's sway at the equator, 20 runs: 0.77 attainable bounds from the start,
+        0.68 from the hand-over)."""
         t, dth, dv = imu.increments()
 
         def fine(rest, rows, C0, t_start, k, after=None):  # k: the increment at the start (its body rate)
@@ -284,7 +284,8 @@ class AdaptiveKalmanAligner(KalmanAligner):
                  vref_sigma=0.05, att_sigma_deg=(1.0, 1.0, None), coarse_s=60.0, engine="numpy",
                  aiding_position_sigma=2.0):
         # kf's options spelled out: a scenario gives its reference noise and IMU to the options it sees here
-        # (fusionbench.discovery.takes_option reads this signature; under **kw akf kept 0.05 m/s whatever the noise)
+        # (fusionbench.methods.discovery.takes_option reads this signature; under **kw akf kept 0.05 m/s whatever the
+        # noise)
         super().__init__(step_s=step_s, imu=imu, vref_sigma=vref_sigma, att_sigma_deg=att_sigma_deg, coarse_s=coarse_s,
                          engine=engine, aiding_position_sigma=aiding_position_sigma)
         self.b, self.window, self.r_floor = float(b), int(window), float(r_floor)

@@ -1,16 +1,16 @@
 """The aiding's measurement model of ``kf`` and ``akf`` (:mod:`baselines.kalman`): rows at their times of validity.
 
-The filter steps every ``step_s``; each row valid within a step (:attr:`fusionbench.aiding.Aiding.t_valid` in the
-step's ``(start, end]``) is compared with the strapdown's state interpolated at its valid time between the sample
-ends bracketing it (:func:`fusionbench.aiding_geometry.bracket`):
+The filter steps every ``step_s``; each row valid within a step (:attr:`fusionbench.simulation.aiding.Aiding.t_valid`
+in the step's ``(start, end]``) is compared with the strapdown's state interpolated at its valid time between the sample
+ends bracketing it (:func:`fusionbench.simulation.aiding_geometry.bracket`):
 
 * **velocity rows** (east, north; the height is held): ``z = v + C_bn (omega_nb^b x l) - v_row``, the lever-arm
   term's attitude coupling in H (``[a x]`` with ``a = C_bn (omega_nb^b x l)``, first order; the gyro bias's
   coupling through ``omega_nb^b``, ``eps x l``, is left out: 7e-6 m/s for a 1 deg/h gyro and 1.5 m);
 * **rows at rest**: ``z = v - v_row`` (the IMU's velocity, no lever arm; ``v_row`` zero when the row has none);
 * **position rows** (east, north, m; only when the aiding measures positions, which adds the position-error states):
-  ``z = enu_offset(p, p_row) + C_bn l`` (:func:`fusionbench.aiding_geometry.enu_offset`,
-  :func:`~fusionbench.aiding_geometry.lever_offset`), ``[(C_bn l) x]`` in H.
+  ``z = enu_offset(p, p_row) + C_bn l`` (:func:`fusionbench.simulation.aiding_geometry.enu_offset`,
+  :func:`~fusionbench.simulation.aiding_geometry.lever_offset`), ``[(C_bn l) x]`` in H.
 
 A row valid ``s`` seconds before the step's end measures the state there: its H is ``H (I - F s)`` (the step's own
 error model, first order in s <= ``step_s``; the process noise between the row and the step's end, a step's at
@@ -34,10 +34,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.aiding_geometry import bracket, displace, enu_offset, lever_offset, lever_velocity, rate_at
-from fusionbench.attitude import rotvec_to_dcm, skew
-from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.simulation import earth
+from fusionbench.simulation.aiding_geometry import bracket, displace, enu_offset, lever_offset, lever_velocity, rate_at
+from fusionbench.simulation.attitude import rotvec_to_dcm, skew
+from fusionbench.simulation.strapdown import NavState, Strapdown
 
 #: Change of acceleration a vehicle may make between two rows, m/s^2: the error of a velocity (position)
 #: interpolated over a gap of ``dt`` seconds is taken as this times ``dt / 4`` (``dt^2 / 8``) in the hand-over's
@@ -55,7 +55,7 @@ class Rows:
     ----------
     k, w : ndarray, shape (n,)
         The increment containing each row's valid time and the fraction of it
-        (:func:`fusionbench.aiding_geometry.bracket`).
+        (:func:`fusionbench.simulation.aiding_geometry.bracket`).
     t_valid : ndarray, shape (n,)
         Valid time of each row, s.
     vel, rest, pos : ndarray of bool, shape (n,)
@@ -116,8 +116,8 @@ class Rows:
 
 
 def prepare_rows(aiding, t_end, t0, runs, vref_sigma, position_sigma, floor=0.0) -> Rows:
-    """The rows of ``aiding`` (an :class:`~fusionbench.aiding.Aiding` for ``runs`` recordings, or None: no row) on the
-    increments ending at ``t_end`` (M,) s from the initial state at ``t0`` s; ``vref_sigma`` (m/s) and
+    """The rows of ``aiding`` (an :class:`~fusionbench.simulation.aiding.Aiding` for ``runs`` recordings, or None: no
+    row) on the increments ending at ``t_end`` (M,) s from the initial state at ``t0`` s; ``vref_sigma`` (m/s) and
     ``position_sigma`` (m) for rows without their own sigma, every sigma at least ``floor``. Rows that measure
     nothing horizontal are dropped."""
     if aiding is None or not aiding.measures.any():
@@ -249,13 +249,14 @@ def initial_motion(aiding, t, C0, w_ib, lat, runs, vref_sigma, position_sigma, a
     """The IMU's velocity and position at the start of the fine stage from the aiding, and how good they are.
 
     Velocity rows (and rows at rest) at ``t`` (s) interpolated, or velocities differenced from the position rows
-    (:meth:`fusionbench.aiding.Aiding.velocities_from_positions`), less the lever arm's velocity with the attitude
-    ``C0`` (R, 3, 3) and the body rate ``w_ib`` (R, 3) rad/s there (:func:`~fusionbench.aiding_geometry.lever_velocity`,
-    the earth rate removed); zero without aiding. The position from the position rows less ``C0 l``.
+    (:meth:`fusionbench.simulation.aiding.Aiding.velocities_from_positions`), less the lever arm's velocity with the
+    attitude ``C0`` (R, 3, 3) and the body rate ``w_ib`` (R, 3) rad/s there
+    (:func:`~fusionbench.simulation.aiding_geometry.lever_velocity`, the earth rate removed); zero without aiding. The
+    position from the position rows less ``C0 l``.
 
     Parameters
     ----------
-    aiding : fusionbench.aiding.Aiding or None
+    aiding : fusionbench.simulation.aiding.Aiding or None
     t : float
         Time of the fine stage's initial state, s.
     C0 : ndarray, shape (R, 3, 3)
@@ -321,13 +322,14 @@ def attitude_at_start(C_end, dth, dv, dt, site, aiding, t0, t1):
     """The attitude C_bn (R, 3, 3) at ``t0`` (s) that the strapdown turns into ``C_end`` (R, 3, 3) at ``t1`` (s) over
     the increments ``dth``, ``dv`` (R, n, 3) (body RFU, rad and m/s, sample interval ``dt`` s) between them.
 
-    The strapdown turns the attitude as ``C <- exp(-[zeta x]) C B`` per sample (:mod:`fusionbench.strapdown`), so
-    ``C(t0) = exp([theta x]) C(t1) B_total^T``, with ``B_total`` the body's turn over the increments (the
-    strapdown's own coning-compensated product, run with the navigation frame held) and ``theta`` the navigation
-    frame's (ENU) turn: the earth rate at the ``site`` and the transport rate of the base's mean velocity over the
-    span, from ``aiding`` (:func:`mean_velocity`; the transport rate is linear in the velocity; None: a fixed base). The steps' rotations
-    do not share one axis (the transport rate turns with the velocity): their product differs from this by about
-    the earth's turn times the transport rate's over the span, 6e-7 rad (0.002 arcmin) over a minute at 0.1 g."""
+    The strapdown turns the attitude as ``C <- exp(-[zeta x]) C B`` per sample
+    (:mod:`fusionbench.simulation.strapdown`), so ``C(t0) = exp([theta x]) C(t1) B_total^T``, with ``B_total`` the
+    body's turn over the increments (the strapdown's own coning-compensated product, run with the navigation frame
+    held) and ``theta`` the navigation frame's (ENU) turn: the earth rate at the ``site`` and the transport rate of
+    the base's mean velocity over the span, from ``aiding`` (:func:`mean_velocity`; the transport rate is linear in
+    the velocity; None: a fixed base). The steps' rotations do not share one axis (the transport rate turns with the
+    velocity): their product differs from this by about the earth's turn times the transport rate's over the span,
+    6e-7 rad (0.002 arcmin) over a minute at 0.1 g."""
     R = dth.shape[0]
     w_ie = earth.earth_rate_n(site.lat)
     held = Strapdown(NavState.broadcast(R, np.eye(3), (0.0, 0.0, 0.0), site.lat, site.lon, site.h), dt,

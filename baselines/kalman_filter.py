@@ -33,10 +33,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.attitude import rotvec_to_dcm, skew
+from fusionbench.simulation import earth
+from fusionbench.simulation.attitude import rotvec_to_dcm, skew
 
-from fusionbench.aiding_geometry import displace
+from fusionbench.simulation.aiding_geometry import displace
 
 from .kalman_aiding import step_measurement
 
@@ -91,7 +91,7 @@ class FeedbackKalman:
 
     Parameters
     ----------
-    sd : fusionbench.strapdown.Strapdown
+    sd : fusionbench.simulation.strapdown.Strapdown
         The strapdown of the R runs.
     bank : baselines.filter_bank.FilterBank
         The filters (``x``, ``P``), of 11 states, or 13 with the position errors.

@@ -1,7 +1,8 @@
 """The long free-inertial run of ``perf_core.py`` (its measurement 3), in a process of its own: one run of a ship's
-sway at 100 Hz for hours, IMU generated and integrated chunk by chunk (:func:`fusionbench.imu.simulate_chunks` ->
-``Strapdown.run``), its wall time, peak RSS and final errors. ``perf_core.py`` starts it (:func:`run_long_child`)
-before it allocates anything, so that the child's ``ru_maxrss`` is its own::
+sway at 100 Hz for hours, IMU generated and integrated chunk by chunk
+(:func:`fusionbench.simulation.imu.simulate_chunks` -> ``Strapdown.run``), its wall time, peak RSS and final errors.
+``perf_core.py`` starts it (:func:`run_long_child`) before it allocates anything, so that the child's ``ru_maxrss`` is
+its own::
 
     python benchmarks/_long_run.py HOURS [--free-vertical] [--perfect-imu]   # prints one JSON line
 """
@@ -27,8 +28,8 @@ ARCSEC = np.pi / 180 / 3600
 def ship_trajectory(duration):
     """Ship-like sway (pitch 1.2 deg at 1/7 Hz, roll 1.2 deg at 1/8 Hz, yaw 0.8 deg at 1/11 Hz),
     static for 60 % of ``duration`` (12 h of 20 h), then east at 0.05 m/s^2 up to 20 m/s."""
-    from fusionbench import trajectory as T
-    from fusionbench.translation import Translation, accelerate_to
+    from fusionbench.simulation import trajectory as T
+    from fusionbench.simulation.translation import Translation, accelerate_to
 
     d = np.radians
     sway = T.EulerSway(mean=(0.0, 0.0, 0.0), amplitude=tuple(d([1.2, 1.2, 0.8])),
@@ -38,7 +39,7 @@ def ship_trajectory(duration):
 
 
 def initial_state(tr, runs):
-    from fusionbench.strapdown import NavState
+    from fusionbench.simulation.strapdown import NavState
 
     tru = tr.truth([0.0])  # increments: the initial state belongs to t[0] - dt = 0
     return NavState.broadcast(runs, tru.C_bn[0], tru.v_n[0], tru.lat[0], tru.lon[0], tru.h[0])
@@ -59,8 +60,8 @@ def _vm_hwm_mb():
 def long_child(hours, free_vertical=False, perfect=False):
     """Body of the child process: one run of ``hours`` h at 100 Hz, chunk by chunk."""
     t_start = time.perf_counter()
-    from fusionbench import attitude, imu
-    from fusionbench.strapdown import Strapdown
+    from fusionbench.simulation import attitude, imu
+    from fusionbench.simulation.strapdown import Strapdown
 
     duration = hours * 3600.0
     tr = ship_trajectory(duration)

@@ -8,7 +8,7 @@ pyins works in NED with FRD body axes and roll-pitch-heading angles, fusionbench
 * generation: ``pyins.sim.generate_imu(time, lla, rph, velocity_n, sensor_type="increment")`` through the angle
   series of the benchmark's sway at the sample times (built beforehand, not timed: pyins cannot generate an
   Euler sway itself), then ``pyins.inertial_sensor.apply_imu_parameters`` with the seed000 preset's errors
-  (bias, white noise, scale factor: the errors ``fusionbench.imu.simulate`` adds), one run;
+  (bias, white noise, scale factor: the errors ``fusionbench.simulation.imu.simulate`` adds), one run;
 * strapdown: ``pyins.strapdown.compute_increments_from_imu(imu, "increment")`` (coning and sculling) and
   ``pyins.strapdown.Integrator(pva).integrate`` over fusionbench's own increments of run 0, a zero "before"
   sample prepended (fusionbench's first step also has no previous sample);
@@ -87,8 +87,8 @@ def bench_pyins(tr, data, spec, dt, repeat, seed=0):
     import pandas as pd
     from pyins import inertial_sensor, sim, strapdown, transform
 
-    from fusionbench import attitude
-    from fusionbench.strapdown import NavState, Strapdown
+    from fusionbench.simulation import attitude
+    from fusionbench.simulation.strapdown import NavState, Strapdown
 
     t_start = time.perf_counter()
     n = data.samples

@@ -7,13 +7,13 @@ Run from the repository root::
 
 Three measurements, all in one invocation (see ``benchmarks/README.md``):
 
-1. IMU generation (:func:`fusionbench.imu.simulate`), one batched call with ``runs=R`` against
+1. IMU generation (:func:`fusionbench.simulation.imu.simulate`), one batched call with ``runs=R`` against
    ``R`` calls with ``runs=1, first_run=k``; both must give identical arrays.
-2. Strapdown (:class:`fusionbench.strapdown.Strapdown`) over the same increments: the compiled kernel
+2. Strapdown (:class:`fusionbench.simulation.strapdown.Strapdown`) over the same increments: the compiled kernel
    batched (one integrator, R runs, chunks of 6000 samples) against looped (R one-run
    integrators), and its NumPy oracle (``tests/oracles/strapdown.py``) on a short slice (batched and looped).
 3. Peak RSS of one long 100 Hz free-inertial run processed chunk by chunk
-   (:func:`fusionbench.imu.simulate_chunks` -> ``Strapdown.run``), in a child process started
+   (:func:`fusionbench.simulation.imu.simulate_chunks` -> ``Strapdown.run``), in a child process started
    before the parent allocates anything, so its ``ru_maxrss`` is its own.
 4. pyins (``python-ins``, a test dependency) side by side, one run of the same sway: its IMU generation and
    strapdown beside fusionbench's, and the final attitudes of both strapdowns over the same increments
@@ -46,7 +46,7 @@ NUMPY_LOOPED_SLICE = 300  # samples per run for the NumPy looped measurement
 def sway_trajectory(duration):
     """Seed-000 (Zhou 2011, ADRC gyrocompass) sway at 34 N: pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz, static
     translation."""
-    from fusionbench import trajectory as T
+    from fusionbench.simulation import trajectory as T
 
     d = np.radians
     sway = T.EulerSway(mean=(0.0, 0.0, 0.0), amplitude=tuple(d([5.0, 7.0, 9.0])),
@@ -71,7 +71,7 @@ def timed(fn, repeat=1):
 
 
 def bench_imu(runs, duration, repeat):
-    from fusionbench import imu
+    from fusionbench.simulation import imu
 
     tr = sway_trajectory(duration)
     spec = imu.PRESETS["seed000"]
@@ -106,7 +106,7 @@ def bench_imu(runs, duration, repeat):
 
 # ----------------------------------------------------------------------- strapdown benchmark
 def _split(g, a, chunk):
-    """Contiguous (runs, chunk, 3) pieces, as :func:`fusionbench.imu.simulate_chunks` yields them
+    """Contiguous (runs, chunk, 3) pieces, as :func:`fusionbench.simulation.imu.simulate_chunks` yields them
     (``Strapdown.run`` would otherwise copy each non-contiguous slice of a batch)."""
     return [(np.ascontiguousarray(g[:, k0:k0 + chunk]), np.ascontiguousarray(a[:, k0:k0 + chunk]))
             for k0 in range(0, g.shape[1], chunk)]
@@ -120,8 +120,7 @@ def _feed(sd, chunks, record_every):
 def bench_strapdown(data, duration, repeat):
     import numba
 
-    from fusionbench import strapdown as S
-    from fusionbench import strapdown_compiled as K
+    from fusionbench.simulation import strapdown as S, strapdown_compiled as K
 
     tr = sway_trajectory(duration)
     g, a = data.gyro, data.accel
@@ -223,7 +222,7 @@ def main(argv=None):
     sd = bench_strapdown(data, duration, args.repeat)
     import _pyins_side as pys
 
-    from fusionbench import imu
+    from fusionbench.simulation import imu
 
     py = None
     if pys.version():

@@ -3,7 +3,7 @@ scenarios x three schemes.
 
 Workload: the built-in scenarios ``paper004-accel-{0.005,0.02,0.05}`` (ship at sea, 5 Hz, seed-004 IMU,
 20 h), each navigated with the ``undamped``, ``fixed`` and ``adaptive`` schemes of ``damped-nav``. The IMU
-data stream through the navigator in 10-minute chunks (``fusionbench.imu.simulate_chunks``), so memory
+data stream through the navigator in 10-minute chunks (``fusionbench.simulation.imu.simulate_chunks``), so memory
 does not grow with the duration: only the once-per-second attitude history is kept. Each scheme
 regenerates its chunks (the same numbers every time: one seed). The level RMSE over the scenario's
 window (one Schuler period after the manoeuvre) is printed beside the times, against truth.
@@ -26,7 +26,9 @@ import time
 import numpy as np
 
 from damping.navigator import DampedNavigator, default_map
-from fusionbench import imu, metrics, scenarios, units
+from fusionbench.bench import scenarios
+from fusionbench.scoring import metrics
+from fusionbench.simulation import imu, units
 
 SCENARIOS = ("paper004-accel-0.005", "paper004-accel-0.02", "paper004-accel-0.05")
 SCHEMES = ("undamped", "fixed", "adaptive")

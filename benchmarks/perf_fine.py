@@ -19,9 +19,9 @@ import time
 import numpy as np
 from joblib import Parallel, delayed
 
-from fusionbench import attitude, trajectory, units
-from fusionbench.aligner import Site, load_method
-from fusionbench.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.methods.aligner import Site, load_method
+from fusionbench.simulation import attitude, trajectory, units
+from fusionbench.simulation.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
 
 METHODS = ("kf", "gtsam", "eso-td")
 LAT = np.radians(34.0)

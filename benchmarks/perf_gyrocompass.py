@@ -54,7 +54,7 @@ ARCMIN = np.pi / 180 / 60
 # ----------------------------------------------------------------------------------- workload
 def sway_trajectory(duration):
     """Seed-000 sway at 34 N: pitch/roll/yaw 5/7/9 deg at 0.5/0.3/0.2 Hz, static translation."""
-    from fusionbench import trajectory as T
+    from fusionbench.simulation import trajectory as T
 
     d = np.radians
     sway = T.EulerSway(mean=(0.0, 0.0, 0.0), amplitude=tuple(d([5.0, 7.0, 9.0])),
@@ -64,8 +64,8 @@ def sway_trajectory(duration):
 
 def workload(runs, duration):
     """IMU data (R runs), velocity reference (R, N, 3), initial guesses (R, 3, 3), site, trajectory."""
-    from fusionbench import attitude, imu
-    from fusionbench.aligner import Site
+    from fusionbench.methods.aligner import Site
+    from fusionbench.simulation import attitude, imu
 
     tr = sway_trajectory(duration)
     data = imu.simulate(tr, imu.PRESETS["seed000"], DT, runs=runs, seed=SEED)
@@ -89,7 +89,7 @@ def control_period(aligner):
 
 def head(data, vref, init, runs, samples):
     """The first ``runs`` runs and ``samples`` samples of the workload (for warm-up and profiling)."""
-    from fusionbench.imudata import IMUData
+    from fusionbench.simulation.imudata import IMUData
 
     return (IMUData(data.t[:samples], data.gyro[:runs, :samples], data.accel[:runs, :samples], data.kind),
             vref[:runs, :samples], init[:runs])
@@ -98,7 +98,7 @@ def head(data, vref, init, runs, samples):
 # ---------------------------------------------------------------------------------- benchmark
 def bench_method(aligner, tr, data, vref, init, site, looped_runs, repeat=1):
     """Batched (one call, all runs) against looped (``looped_runs`` calls of one run)."""
-    from fusionbench import attitude
+    from fusionbench.simulation import attitude
 
     R, n = data.runs, data.samples
     m = max(1, int(round(control_period(aligner) / data.dt)))

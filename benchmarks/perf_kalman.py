@@ -35,9 +35,9 @@ import time
 import numpy as np
 
 from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner
-from fusionbench import attitude, trajectory
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, simulate
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation import attitude, trajectory
+from fusionbench.simulation.imu import PRESETS, simulate
 
 LAT = np.radians(34.0)
 TARGET = 20.0  # issue 16: batched at least 20x the per-run loop at 50 runs

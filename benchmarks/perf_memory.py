@@ -2,9 +2,9 @@
 
 Each measurement is one ``fusionbench run SCENARIO --runs N --jobs 1`` in a fresh child process, so that its peak
 resident set size (``ru_maxrss``) is its own; the child runs the command line's ``main`` with
-``fusionbench.streaming.STREAM_MIN_S`` left as it is (``streamed``: the runner feeds the chunks to the methods that
-take them) or set to infinity (``whole``: every run's samples held, as before the streaming). The metrics of the two
-are compared (all but wall times and provenance) and must be equal.
+``fusionbench.bench.streaming.STREAM_MIN_S`` left as it is (``streamed``: the runner feeds the chunks to the methods
+that take them) or set to infinity (``whole``: every run's samples held, as before the streaming). The metrics of the
+two are compared (all but wall times and provenance) and must be equal.
 
     python benchmarks/perf_memory.py                 # paper004-accel-0.02 (20 h at 5 Hz), 2, 8 and 16 runs
     python benchmarks/perf_memory.py --quick         # 2 and 4 runs
@@ -25,7 +25,7 @@ from pathlib import Path
 
 CHILD = """
 import json, resource, sys
-from fusionbench import streaming
+from fusionbench.bench import streaming
 from fusionbench.cli import main
 mode, out = sys.argv[1], sys.argv[2]
 if mode == "whole":

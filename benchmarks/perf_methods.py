@@ -46,10 +46,11 @@ import time
 
 import numpy as np
 
-from fusionbench import aligner, claims, trajectory
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, simulate
-from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.methods import aligner, claims
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation import trajectory
+from fusionbench.simulation.imu import PRESETS, simulate
+from fusionbench.simulation.strapdown import NavState, Strapdown
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _oracle import oracle_patch, numpy_oracles  # noqa: E402 (the benchmarks' folder on the path)

@@ -53,7 +53,7 @@ from baselines.rolling.ekf import ENGINES, RollingEKF
 from baselines.rolling.priors import prior_sigma
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, Segment
 from baselines.rolling.simulator import simulate
-from fusionbench import units
+from fusionbench.simulation import units
 
 LAT = np.radians(34.0)
 ANGLES0 = np.radians([2.0, 3.0, 5.0])

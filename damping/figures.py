@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fusionbench.figures import save_png  # noqa: E402
+from fusionbench.reports.figures import save_png  # noqa: E402
 
 from . import network, qmap  # noqa: E402
 

@@ -1,7 +1,7 @@
 """Free-inertial navigation with seed 004's (Gu 2017, adaptive Schuler damping) internal horizontal damping (Sec. 4.1),
 method ``damped-nav``.
 
-The strapdown (:class:`fusionbench.strapdown.Strapdown`, ENU, body RFU) runs at the IMU rate; every
+The strapdown (:class:`fusionbench.simulation.strapdown.Strapdown`, ENU, body RFU) runs at the IMU rate; every
 ``step_s`` (1 s, the paper's step) the damping network H(s) (:mod:`damping.network`) filters the
 horizontal velocity, and the transport rate of the computed frame is taken from the filtered
 velocity ``v_H = H(s) v`` instead of ``v``. The strapdown computes ``omega_en(v)`` itself, so the
@@ -36,11 +36,11 @@ interpolated at each step (within 1e-3 in q of the regressor itself).
 Memory: the data are processed step by step and the history is kept once per step (attitude,
 q), so a 20-hour run at 5 Hz holds 72 000 attitudes per run besides its input;
 :meth:`DampedNavigator.navigate_chunks` takes the IMU data as an iterator of chunks (e.g.
-:func:`fusionbench.imu.simulate_chunks`), so the input need not be held either.
+:func:`fusionbench.simulation.imu.simulate_chunks`), so the input need not be held either.
 
-:class:`DampedNavigator` is a :class:`fusionbench.aligner.Navigator` (``navigate(imu, site, init, vref=None)``);
+:class:`DampedNavigator` is a :class:`fusionbench.methods.aligner.Navigator` (``navigate(imu, site, init, vref=None)``);
 its ``align`` is the adapter the runner calls, through the input policy of
-:class:`fusionbench.aligner_base.AlignerBase` (which refuses it without ``init``: ``supports.needs_init``).
+:class:`fusionbench.methods.aligner_base.AlignerBase` (which refuses it without ``init``: ``supports.needs_init``).
 """
 
 from __future__ import annotations
@@ -49,11 +49,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from fusionbench.aligner import AlignmentResult
-from fusionbench.claims import Supports
-from fusionbench.aligner_base import AlignerBase, per_increment_velocity
-from fusionbench.imudata import IMUData
-from fusionbench.inputs import check_init
+from fusionbench.methods.aligner import AlignmentResult
+from fusionbench.methods.aligner_base import AlignerBase, per_increment_velocity
+from fusionbench.methods.claims import Supports
+from fusionbench.methods.inputs import check_init
+from fusionbench.simulation.imudata import IMUData
 
 from . import network, qmap
 from .navigator_loop import SCHEMES, Loop
@@ -140,7 +140,8 @@ class DampedNavigator(AlignerBase):
         return qmap.QMap.load(self.qmap_path) if self.qmap_path else default_map(self.max_error_deg)
 
     def events(self, init_given):
-        """Stages for the figures (:mod:`fusionbench.figures`), s: the network switched in at ``damp_from_s``."""
+        """Stages for the figures (:mod:`fusionbench.reports.figures`), s: the network switched in at
+        ``damp_from_s``."""
         return [] if self.scheme == "undamped" else [(self.damp_from_s, "damping network switched in")]
 
     #: Axis labels of the series of :meth:`navigate` for the figures (q is a pure number).
@@ -148,14 +149,14 @@ class DampedNavigator(AlignerBase):
 
     def navigate(self, imu: IMUData, site, init, vref=None) -> AlignmentResult:
         """Navigate R recordings from the initial attitude ``init``, at rest at ``site``
-        (:class:`fusionbench.aligner.Navigator`; the input policy of :class:`fusionbench.aligner_base.AlignerBase`
-        first).
+        (:class:`fusionbench.methods.aligner.Navigator`; the input policy of
+        :class:`fusionbench.methods.aligner_base.AlignerBase` first).
 
         Parameters
         ----------
         imu : IMUData
             Recordings, body RFU; increments or rates.
-        site : fusionbench.aligner.Site
+        site : fusionbench.methods.aligner.Site
             Initial latitude, longitude (rad) and height (m); the vehicle starts at rest.
         init : ndarray, shape (R, 3, 3) or (3, 3)
             Initial attitude C_bn (body RFU to ENU), e.g. the result of an alignment.
@@ -190,8 +191,8 @@ class DampedNavigator(AlignerBase):
         return self.navigate_chunks(chunks, site, init, dt=imu.dt, t0=imu.t0, runs=imu.runs)
 
     def _align_chunks(self, chunks, site, init, dt, t0, runs):
-        """The runner's stream of a long record (:meth:`fusionbench.aligner_base.AlignerBase.align_chunks`, after
-        the input policy): :meth:`navigate_chunks`, the reference velocity passed on only where the scheme reads
+        """The runner's stream of a long record (:meth:`fusionbench.methods.aligner_base.AlignerBase.align_chunks`,
+        after the input policy): :meth:`navigate_chunks`, the reference velocity passed on only where the scheme reads
         it (``accel_source="vref"``), as :meth:`navigate` does."""
         use_vref = self.accel_source == "vref"
 

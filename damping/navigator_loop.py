@@ -1,7 +1,8 @@
 """The compiled loop of seed 004's damped navigation (:class:`damping.navigator.DampedNavigator`, Gu 2017, adaptive
 Schuler damping): whole network steps of all runs in one numba kernel, the damping network's lags, the commanded rate
-``omega_en(v_H) - omega_en(v)`` (rad/s, ENU), the strapdown (:func:`fusionbench.strapdown_compiled.integrate_compiled`)
-and the acceleration tracking of the adaptive map; :class:`Loop` holds its state between chunks of data."""
+``omega_en(v_H) - omega_en(v)`` (rad/s, ENU), the strapdown
+(:func:`fusionbench.simulation.strapdown_compiled.integrate_compiled`) and the acceleration tracking of the adaptive
+map; :class:`Loop` holds its state between chunks of data."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.strapdown import NavState, Strapdown
-from fusionbench.strapdown_compiled import integrate_compiled
+from fusionbench.simulation import earth
+from fusionbench.simulation.strapdown import NavState, Strapdown
+from fusionbench.simulation.strapdown_compiled import integrate_compiled
 
 from . import network, qmap
 
@@ -43,8 +44,8 @@ def _interp_grid(x, x0, dx, n):
 def _damped_steps(sd_state, dth, dv, ns, dt, step, damp_from, scheme, v_track, q_fixed, q0, dq, Ad_tab, Bd_tab,
                   la0, dla, q_tab, alpha, release, x, a_f, a_env, v_prev, flags, clock, out_C, out_q):
     """Whole network steps of ``ns`` samples for all runs: network (lags x, coefficient q), commanded rate,
-    strapdown (:func:`fusionbench.strapdown_compiled.integrate_compiled`), acceleration tracking. ``scheme``: 0
-    undamped, 1 fixed, 2 adaptive; ``v_track`` (R, S, 2) the step-mean reference velocity for the adaptive
+    strapdown (:func:`fusionbench.simulation.strapdown_compiled.integrate_compiled`), acceleration tracking.
+    ``scheme``: 0 undamped, 1 fixed, 2 adaptive; ``v_track`` (R, S, 2) the step-mean reference velocity for the adaptive
     map, or empty to track the INS's own velocity. Loop state (x, a_f, a_env, v_prev, flags = [engaged,
     has v_prev], clock = [t]) is updated in place."""
     C0, v0, lat0, lon0, h0, vp0, thp, dvp = sd_state

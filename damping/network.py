@@ -35,7 +35,7 @@ import numpy as np
 from scipy import signal
 from scipy.optimize import brentq
 
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 #: Schuler frequency at the paper's latitude (35 deg), rad/s.
 WS = float(earth.schuler_frequency(np.radians(35.0)))

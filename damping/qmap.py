@@ -26,8 +26,8 @@ from sklearn.model_selection import GridSearchCV, train_test_split
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
-from fusionbench.imufiles import atomic_open
-from fusionbench.units import DEG
+from fusionbench.files.imufiles import atomic_open
+from fusionbench.simulation.units import DEG
 
 from .network import simulated_peak_error
 

@@ -9,7 +9,7 @@ sys.path.insert(0, str(ROOT))
 project = "fusionbench"
 author = "the fusionbench authors"
 copyright = "2026, the fusionbench authors"
-release = version = "0.1.0"
+release = version = "0.2.0"
 
 extensions = [
     "myst_parser",              # the pages are Markdown, readable on a forge as they are

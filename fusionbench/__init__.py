@@ -7,33 +7,53 @@ Euler angles C_bn = Rz(yaw) Rx(pitch) Ry(roll). SI units in every array.
 import os as _os
 import sys as _sys
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
-#: The packages whose numba kernels are cached (they call each other's compiled functions).
-COMPILED_PACKAGES = ("fusionbench", "adrc", "baselines", "damping")
+#: The entry-point groups through which plug-ins (the method families, a user's own package) reach the core.
+PLUGIN_GROUPS = ("fusionbench.methods", "fusionbench.experiments", "fusionbench.features", "fusionbench.calibrators")
+
+
+def compiled_packages() -> tuple:
+    """``fusionbench`` and the top-level package of every plug-in registered in :data:`PLUGIN_GROUPS` (read from the
+    installed distributions' metadata, nothing imported): the packages whose numba kernels may call each other's."""
+    from importlib.metadata import entry_points
+
+    every = entry_points()  # one scan of the installed distributions, then a selection per group
+    found = {ep.value.split(":")[0].split(".")[0] for group in PLUGIN_GROUPS for ep in every.select(group=group)}
+    return tuple(["fusionbench"] + sorted(found - {"fusionbench"}))
 
 
 def compiled_sources_key(root=None):
-    """A digest (12 hex digits) of the source of every module of :data:`COMPILED_PACKAGES` under ``root`` (default:
-    where this package is installed) that uses numba.
+    """A digest (12 hex digits) of the source of every module of :func:`compiled_packages` that uses numba: each
+    package's folder under ``root``, or (default) where it is installed.
 
     numba invalidates a cached kernel when its own file changes, not when a compiled function it calls from another
     file does (the strapdown kernel inside the compass loops, say): a kernel cached before such an edit would run
     the old code. The cache folder is therefore named by this digest, so any change to compiled code, or a new
     version, starts a fresh cache."""
     import hashlib
+    import importlib.util
 
-    root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__))) if root is None else str(root)
     digest = hashlib.sha256()
-    for pkg in COMPILED_PACKAGES:
-        for folder, dirs, files in sorted(_os.walk(_os.path.join(root, pkg))):
+    for pkg in compiled_packages():
+        if root is not None:
+            folder0 = _os.path.join(str(root), pkg)
+        elif pkg == __name__:
+            folder0 = _os.path.dirname(_os.path.abspath(__file__))
+        else:
+            spec = importlib.util.find_spec(pkg)
+            if spec is None or not spec.submodule_search_locations:
+                continue  # a single-module plug-in, or one not importable here: nothing of ours to cache
+            folder0 = list(spec.submodule_search_locations)[0]
+        base = _os.path.dirname(folder0)
+        for folder, dirs, files in sorted(_os.walk(folder0)):
             dirs.sort()
             for name in sorted(f for f in files if f.endswith(".py")):
                 with open(_os.path.join(folder, name), "rb") as fh:
                     text = fh.read()
                 if b"numba" in text:
-                    digest.update(_os.path.relpath(_os.path.join(folder, name), root).encode() + b"\0" + text)
+                    digest.update(_os.path.relpath(_os.path.join(folder, name), base).encode() + b"\0" + text)
     return digest.hexdigest()[:12]
 
 
@@ -57,14 +77,18 @@ if "numba" in _sys.modules:  # imported before us: make it read the directory ag
 #: that ``import fusionbench`` stays light (the command line, numba's cache set-up). Submodules are names too.
 API = {
     # align and the methods
-    "align": "api", "load_method": "aligner", "available_methods": "aligner", "Site": "aligner",
-    "AlignmentResult": "aligner",
+    "align": "api", "load_method": "methods.aligner", "available_methods": "methods.aligner", "Site": "methods.aligner",
+    "AlignmentResult": "methods.aligner",
     # data: simulate, read, hold
-    "simulate": "imu", "IMUSpec": "imu", "SensorErrors": "imu", "PRESETS": "imu", "load_spec": "imu",
-    "IMUData": "imudata", "read_imu": "imufiles", "read_aiding": "aidingfiles", "AidingSpec": "aidingsim",
-    "simulate_aiding": "aidingsim", "Trajectory": "trajectory", "EulerSway": "trajectory", "car_drive": "drive",
+    "simulate": "simulation.imu", "IMUSpec": "simulation.imu", "SensorErrors": "simulation.imu",
+    "PRESETS": "simulation.imu", "load_spec": "simulation.imu", "IMUData": "simulation.imudata",
+    "read_imu": "files.imufiles", "read_aiding": "files.aidingfiles", "AidingSpec": "simulation.aidingsim",
+    "simulate_aiding": "simulation.aidingsim", "Trajectory": "simulation.trajectory",
+    "EulerSway": "simulation.trajectory", "car_drive": "simulation.drive",
     # modules: scoring, frames, units, motion
-    "metrics": None, "attitude": None, "units": None, "earth": None, "trajectory": None, "drive": None, "imu": None,
+    "metrics": "scoring.metrics", "attitude": "simulation.attitude", "units": "simulation.units",
+    "earth": "simulation.earth", "trajectory": "simulation.trajectory", "drive": "simulation.drive",
+    "imu": "simulation.imu",
 }
 
 
@@ -73,11 +97,16 @@ def __getattr__(name):
         raise AttributeError(f"module 'fusionbench' has no attribute {name!r}")
     import importlib
 
-    module = importlib.import_module(f"{__name__}.{API[name] or name}")
-    value = module if API[name] is None else getattr(module, name)
+    module = importlib.import_module(f"{__name__}.{API[name]}")
+    value = module if API[name].rsplit(".", 1)[-1] == name else getattr(module, name)
     globals()[name] = value
     return value
 
 
 def __dir__():
     return sorted(set(globals()) | set(API))
+
+
+from fusionbench import _moved  # noqa: E402 (the 0.1 module paths, with a FutureWarning)
+
+_moved.install()

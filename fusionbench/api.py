@@ -2,15 +2,15 @@
 
 :func:`align` is what ``fusionbench align`` does for a recording, for data in memory: it builds a registered method
 (or a ``module:Class`` path) with its options and calls it as the runner and the command line do
-(:func:`fusionbench.aligner.call_align`), so a method refuses in one line what it does not claim. The other names of
-the top-level API (``fb.Site``, ``fb.simulate``, ``fb.read_imu``, ``fb.metrics``, ...) are the library's own objects,
-listed in :data:`fusionbench.API`.
+(:func:`fusionbench.methods.aligner.call_align`), so a method refuses in one line what it does not claim. The other
+names of the top-level API (``fb.Site``, ``fb.simulate``, ``fb.read_imu``, ``fb.metrics``, ...) are the library's own
+objects, listed in :data:`fusionbench.API`.
 """
 
 from __future__ import annotations
 
-from .aligner import AlignmentResult, Site, call_align, load_method
-from .imudata import IMUData
+from fusionbench.methods.aligner import AlignmentResult, Site, call_align, load_method
+from fusionbench.simulation.imudata import IMUData
 
 __all__ = ["align"]
 
@@ -23,21 +23,22 @@ def align(imu: IMUData, site: Site, method: str = "kf", *, aiding=None, init=Non
     ----------
     imu : IMUData
         R recordings, body RFU (right, front, up): increments (rad, m/s) or rates (rad/s, m/s^2), from
-        :func:`fusionbench.imu.simulate` or :func:`fusionbench.imufiles.read_imu` (its first return value).
+        :func:`fusionbench.simulation.imu.simulate` or :func:`fusionbench.files.imufiles.read_imu` (its first return
+        value).
     site : Site
         Latitude, longitude (rad) and height (m) of the start (:meth:`Site.from_degrees` takes degrees).
     method : str
         A name of ``fusionbench list`` (``"kf"``, ``"gtsam"``, ``"adrc"``, ...) or a ``module:Class`` path.
-    aiding : fusionbench.aiding.Aiding, optional
+    aiding : fusionbench.simulation.aiding.Aiding, optional
         Velocity or position rows (ENU, m/s or geodetic) with their times of validity, for a moving base
-        (:func:`fusionbench.aidingfiles.read_aiding`, :func:`fusionbench.aidingsim.simulate_aiding`); None: the base
-        is at rest, which the methods check.
+        (:func:`fusionbench.files.aidingfiles.read_aiding`, :func:`fusionbench.simulation.aidingsim.simulate_aiding`);
+        None: the base is at rest, which the methods check.
     init : ndarray, shape (3, 3) or (R, 3, 3), optional
         Initial attitude guess ``C_bn`` (body RFU to ENU) for the methods that take one (the fine-alignment filters
         and graphs); None: each method's own coarse start.
     imu_spec : str, path or IMUSpec, optional
         The IMU noise model (a preset name such as ``"navigation"``, an IMU spec TOML file or an
-        :class:`fusionbench.imu.IMUSpec`) given to a method that uses one, as ``--imu`` on the command line.
+        :class:`fusionbench.simulation.imu.IMUSpec`) given to a method that uses one, as ``--imu`` on the command line.
     **options
         The method's constructor options (its class docstring), e.g. ``step_s=0.5``.
 

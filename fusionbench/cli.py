@@ -23,10 +23,12 @@ from pathlib import Path
 import numpy as np
 from joblib import parallel_config
 
-from . import __version__, cli_record, progress, provenance, reportdir, scenarios
-from .aligner import METHODS_GROUP, available_methods, uses_noise_model
-from .claims import MAX_BIAS_TO_EARTH_RATE, supports
-from .cli_common import exception_text, integer, named
+from fusionbench import __version__, cli_record
+from fusionbench.bench import scenarios
+from fusionbench.cli_common import exception_text, integer, named
+from fusionbench.files import progress, provenance, reportdir
+from fusionbench.methods.aligner import METHODS_GROUP, available_methods, uses_noise_model
+from fusionbench.methods.claims import MAX_BIAS_TO_EARTH_RATE, supports
 
 #: Exit statuses: a check found a regression; bad input or a failed method; interrupted (128 + SIGINT); the
 #: reader of standard output went away (128 + SIGPIPE, what a shell reports for a tool SIGPIPE ended).
@@ -103,7 +105,7 @@ def _overrides(args):
     """The scenario entries ``run --imu`` and ``--site`` replace (an IMU file's path made absolute)."""
     out = {}
     if args.imu is not None:
-        from .imu import PRESETS
+        from fusionbench.simulation.imu import PRESETS
 
         out["imu"] = args.imu if args.imu in PRESETS else str(Path(args.imu).expanduser().resolve())
     if args.site is not None:
@@ -121,7 +123,7 @@ def _cmd_list(args):
         print(f"  {name:<28} {getattr(cls, 'description', '')}{_method_notes(cls)}")
     from importlib.metadata import entry_points
 
-    from .experiment import all_experiments
+    from fusionbench.bench.experiment import all_experiments
 
     for exp_name, exp in all_experiments().items():  # methods of another kind, from the experiment that runs them
         if exp.method_group != METHODS_GROUP:
@@ -208,7 +210,7 @@ def _workers(args):
     if args.scheduler is None and args.cluster is None:
         yield args.jobs
         return
-    from .cluster import connect, parse_cluster
+    from fusionbench.bench.cluster import connect, parse_cluster
 
     size = None if args.cluster is None else parse_cluster(args.cluster)
     with connect(args.scheduler, size) as n_jobs:
@@ -217,8 +219,8 @@ def _workers(args):
 
 def _run_all(args, scns, methods, out_dir, total, n_jobs):
     """Run ``scns`` with ``n_jobs`` workers and write their reports (and the overview of 'all')."""
-    from .experiment import run_scenario, write_scenario_report
-    from .overview import write_overview
+    from fusionbench.bench.experiment import run_scenario, write_scenario_report
+    from fusionbench.experiments.overview import write_overview
 
     outs, pbar = [], None
     # before any Monte Carlo: every report folder replaceable, its parent writable (created)
@@ -259,7 +261,8 @@ def _run_all(args, scns, methods, out_dir, total, n_jobs):
 
 
 def _cmd_check(args):
-    from .check import compare, format_table, load_metrics, metrics_files, packaged_reference, reference_for
+    from fusionbench.bench.check import (compare, format_table, load_metrics, metrics_files, packaged_reference,
+                                         reference_for)
 
     failed = False
     pairs = []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from .aligner import entry_class
+from fusionbench.methods.aligner import entry_class
 
 
 def integer(expected, ok):

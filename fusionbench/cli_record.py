@@ -1,7 +1,7 @@
 """The commands on a user's recording: ``align``, ``identify`` and ``consistency`` (the contract:
 docs/contract.md), with what they share: the file's format (``--format``), its site (``--lat``, or a ``.imu``
 header) and, for ``align`` and ``consistency``, a receiver's rows (``--aiding`` and the options that say how to
-read them: :mod:`fusionbench.aidingfiles`, docs/aiding.md)."""
+read them: :mod:`fusionbench.files.aidingfiles`, docs/aiding.md)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import attitude, units
-from .aiding import MAX_DELAY_S, MAX_LEVER_ARM_M
-from .aligner import METHODS_GROUP, AlignmentResult, Site, call_align, check_time_rule, load_method
-from .cli_common import kind, named, seconds
-from .imu import load_spec
+from fusionbench.cli_common import kind, named, seconds
+from fusionbench.methods.aligner import METHODS_GROUP, AlignmentResult, Site, call_align, check_time_rule, load_method
+from fusionbench.simulation import attitude, units
+from fusionbench.simulation.aiding import MAX_DELAY_S, MAX_LEVER_ARM_M
+from fusionbench.simulation.imu import load_spec
 
 #: How far the mean specific force of a record given to ``align`` may be from the site's gravity (relative): a unit
 #: check. A moored ship's sway changes it by far less, so does a car's drive (its accelerations, brakings and turns
@@ -71,7 +71,7 @@ def record_arguments(p):
 
 def aiding_arguments(p):
     """The options of a command that takes a receiver's rows (docs/aiding.md): the file and how to read it."""
-    from .aidingfiles import FORMATS
+    from fusionbench.files.aidingfiles import FORMATS
 
     p.add_argument("--aiding", metavar="FILE", help="the velocity and/or position rows of a receiver (GNSS, "
                    "odometer) beside the IMU, at its own epochs: what a moving base needs (docs/aiding.md)")
@@ -90,7 +90,7 @@ def lever_arm_text(text):
     """``X,Y,Z`` (m, body right, front, up) as an array: an argparse type."""
     import argparse
 
-    from .aidingfiles import check_lever_arm
+    from fusionbench.files.aidingfiles import check_lever_arm
 
     try:
         return check_lever_arm([float(x) for x in text.split(",")])
@@ -116,11 +116,11 @@ def check_aiding_options(args):
 
 
 def read_aiding_file(args):
-    """The rows of ``--aiding`` (an :class:`~fusionbench.aiding.Aiding`) read with the options, or None."""
+    """The rows of ``--aiding`` (an :class:`~fusionbench.simulation.aiding.Aiding`) read with the options, or None."""
     check_aiding_options(args)
     if args.aiding is None:
         return None
-    from .aidingfiles import read_aiding
+    from fusionbench.files.aidingfiles import read_aiding
 
     return read_aiding(args.aiding, args.aiding_format or "csv",
                        lever_arm=np.zeros(3) if args.lever_arm is None else args.lever_arm,
@@ -128,9 +128,9 @@ def read_aiding_file(args):
 
 
 def aiding_json(args, aiding):
-    """What ``--json`` and consistency.json say of the rows: :func:`fusionbench.aidingfiles.aiding_summary` with
+    """What ``--json`` and consistency.json say of the rows: :func:`fusionbench.files.aidingfiles.aiding_summary` with
     the file's format and the time offset applied."""
-    from .aidingfiles import aiding_summary
+    from fusionbench.files.aidingfiles import aiding_summary
 
     return {**aiding_summary(aiding), "format": args.aiding_format or "csv",
             "time_offset_s": float(args.aiding_time_offset or 0.0)}
@@ -139,10 +139,10 @@ def aiding_json(args, aiding):
 def read_record(args, min_samples=2):
     """The recording ``args.imu_file`` (one run, SI, body RFU) and its meta, read by ``--format`` or by extension."""
     if args.format is None:
-        from .imufiles import read_imu
+        from fusionbench.files.imufiles import read_imu
 
         return read_imu(args.imu_file, min_samples=min_samples)
-    from .layouts import layout_from_name_or_file, read_layout
+    from fusionbench.files.layouts import layout_from_name_or_file, read_layout
 
     return read_layout(args.imu_file, layout_from_name_or_file(args.format), min_samples=min_samples)
 
@@ -154,7 +154,7 @@ def record_site(args, meta):
     if not meta:  # the command line's own values alone
         return Site.from_degrees(args.lat, args.lon or 0.0, args.height or 0.0) if args.lat is not None else None
     if args.lat is None and "lat" not in meta:
-        from .imufiles import IMUFileError
+        from fusionbench.files.imufiles import IMUFileError
 
         raise IMUFileError(meta["path"], f"a {meta['format']} file holds no site: give --lat DEG (and --lon DEG, "
                                          f"--height M; they default to 0)")
@@ -165,7 +165,7 @@ def record_site(args, meta):
 
 
 def cmd_align(args):
-    from .imufiles import IMUFileError
+    from fusionbench.files.imufiles import IMUFileError
 
     noise = None if args.imu is None else load_spec(args.imu)
     method = named(args.method, lambda: load_method(args.method, imu=noise), group=METHODS_GROUP)
@@ -220,12 +220,13 @@ NO_LIMIT = {"imu": "no --imu: the limit is that of a named IMU's fixed biases",
 def answer_claims(method, res, imu, site, aiding, spec):
     """What ``align`` adds to an answer: the kind of base (``base``), the method's predicted sigma at the last sample
     (``sigma_arcmin``, from ``res.sigma_phi``; None without), the limit the fixed biases of ``spec`` put the
-    misalignment at, at the answer's attitude and the site (``limit_arcmin``, :func:`fusionbench.metrics.theoretical_limits`;
-    None without ``spec`` or on a moving base, ``limit_note`` saying why) and why the answer lies outside the
-    method's claim (``outside_claim``, :func:`fusionbench.claim_check.outside_claim`; None inside). Angles are
-    ``{"E", "N", "U"}`` misalignment components, ENU, arcmin."""
-    from .claim_check import base_kind, outside_claim
-    from .metrics import theoretical_limits
+    misalignment at, at the answer's attitude and the site (``limit_arcmin``,
+    :func:`fusionbench.scoring.metrics.theoretical_limits`; None without ``spec`` or on a moving base, ``limit_note``
+    saying why) and why the answer lies outside the method's claim (``outside_claim``,
+    :func:`fusionbench.bench.claim_check.outside_claim`; None inside). Angles are ``{"E", "N", "U"}`` misalignment
+    components, ENU, arcmin."""
+    from fusionbench.bench.claim_check import base_kind, outside_claim
+    from fusionbench.scoring.metrics import theoretical_limits
 
     base = base_kind(imu, aiding)
     sigma = None if res.sigma_phi is None else enu_arcmin(res.sigma_phi[0, -1])
@@ -255,7 +256,7 @@ def aiding_line(info):
 
 
 def cmd_identify(args):
-    from .identify import run_identify
+    from fusionbench.recording.identify import run_identify
 
     imu, _ = read_record(args)
     name = args.name or Path(args.imu_file).stem
@@ -265,9 +266,9 @@ def cmd_identify(args):
 
 
 def cmd_consistency(args):
-    from .consistency import consistency
-    from . import reportdir
-    from .consistency_report import OUTPUT, summary_lines, write_consistency_report
+    from fusionbench.files import reportdir
+    from fusionbench.recording.consistency import consistency
+    from fusionbench.recording.consistency_report import OUTPUT, summary_lines, write_consistency_report
 
     methods = [m for m in args.methods.split(",") if m]
     if not methods:

@@ -98,7 +98,8 @@ def drive(lat_deg=45.0, lon_deg=12.0, height_m=100.0, heading_deg=30.0, rate_hz=
     """A car's drive with turns simulated by pyins: from rest, smoothly up to 10 m/s over 20 s, then a 40-deg turn
     (right, then left, ...) every 30 s at up to 8 deg/s, each a raised-cosine heading rate over 10 s; the IMU tilted
     by ``pitch_deg`` and ``roll_deg`` on the car, its forward axis along the velocity. A perfect IMU (rates at the
-    sample times and increments), the truth at the samples. Defined here, independently of fusionbench.drive."""
+    sample times and increments), the truth at the samples. Defined here, independently of
+    fusionbench.simulation.drive."""
     from pyins import sim, transform
 
     n = int(round(duration_s * rate_hz)) + 1

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from adrc.gyrocompass import PAPER_PARAMETERS, ADRCGyrocompass, level_loop_model, level_noise
-from fusionbench import attitude, earth, metrics, trajectory as tj, units
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, IMUSpec, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.methods.aligner import Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, IMUSpec, VelocityReferenceSpec, simulate, simulate_vref
 
 D = np.pi / 180
 DT = 0.01  # 100-Hz IMU

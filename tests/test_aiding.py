@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from fusionbench import attitude, drive, earth, imu, trajectory, units
-from fusionbench.aiding import Aiding
-from fusionbench.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
-from fusionbench.aidingsim import AidingSpec, simulate_aiding
-from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.simulation import attitude, drive, earth, imu, trajectory, units
+from fusionbench.simulation.aiding import Aiding
+from fusionbench.simulation.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
+from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
+from fusionbench.simulation.strapdown import NavState, Strapdown
 
 D = np.pi / 180
 LAT = 45 * D

@@ -1,6 +1,6 @@
-"""Aiding files (fusionbench.aidingfiles, fusionbench.aidingnmea; docs/aiding.md "Files"): each reader on a small
-hand-written file against the numbers written in it, and every bad input through the command line (one line naming
-the file, exit status 2)."""
+"""Aiding files (fusionbench.files.aidingfiles, fusionbench.files.aidingnmea; docs/aiding.md "Files"): each reader on
+a small hand-written file against the numbers written in it, and every bad input through the command line (one line
+naming the file, exit status 2)."""
 
 import json
 
@@ -8,8 +8,8 @@ import numpy as np
 import pynmea2
 import pytest
 
-from fusionbench.aidingfiles import AidingFileError, aiding_summary, read_aiding
 from fusionbench.cli import main
+from fusionbench.files.aidingfiles import AidingFileError, aiding_summary, read_aiding
 
 D = np.pi / 180
 KNOT = 1852.0 / 3600.0  # m/s
@@ -137,9 +137,9 @@ def test_nmea_rmc_alone_gives_velocity_and_position_without_height(tmp_path):
 @pytest.fixture(scope="module")
 def still(tmp_path_factory):
     """A 20-s stationary CSV recording at 50 Hz."""
-    from fusionbench import trajectory as tj
-    from fusionbench.imu import PRESETS, simulate
-    from fusionbench.imufiles import write_csv
+    from fusionbench.files.imufiles import write_csv
+    from fusionbench.simulation import trajectory as tj
+    from fusionbench.simulation.imu import PRESETS, simulate
 
     tr = tj.Trajectory(0.6, 0.0, 0.0, tj.EulerSway(mean=(0.0, 0.0, 1.0)), duration=20.0)
     return write_csv(tmp_path_factory.mktemp("rec") / "still.csv", simulate(tr, PRESETS["navigation"].noise_free(),
@@ -257,9 +257,9 @@ def test_nmea_keeps_the_first_sentence_of_a_type_in_an_epoch_skips_a_leading_vtg
 
 
 def test_rows_written_as_an_aiding_csv_read_back_the_same(tmp_path):
-    from fusionbench import drive
-    from fusionbench.aidingfiles import write_csv
-    from fusionbench.aidingsim import AidingSpec, simulate_aiding
+    from fusionbench.files.aidingfiles import write_csv
+    from fusionbench.simulation import drive
+    from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
 
     car = drive.car_drive(np.radians(45.0), heading=0.5, duration=60.0, wait=0.05)
     rows = simulate_aiding(car, AidingSpec(1.0, (0.05,) * 3, (0.5,) * 3, lever_arm=(0.5, 1.2, 0.74), delay=0.05),

@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from fusionbench import attitude, units
 from fusionbench.cli import main
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import write_csv
+from fusionbench.files.imufiles import write_csv
+from fusionbench.simulation import attitude, units
+from fusionbench.simulation.imudata import IMUData
 from tests import independent
 
 LEVER = (0.5, 1.2, 0.74)      # m, body right-front-up: 1.49 m

@@ -1,6 +1,6 @@
 """``align``'s answer with its uncertainty and its claim (issue 24): the method's predicted sigma, the limit of the
 IMU's fixed biases and, when the record or the IMU lies outside what the method claims, the reason and a warning
-(fusionbench.claim_check). The figures asserted are computed here from the spec, the earth's constants and the
+(fusionbench.bench.claim_check). The figures asserted are computed here from the spec, the earth's constants and the
 method's own result."""
 
 import json
@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from fusionbench import earth, trajectory as tj, units
-from fusionbench.aiding import Aiding
-from fusionbench.aligner import Site, load_method
-from fusionbench.claim_check import SWAY_RATIO, base_kind, outside_claim, rate_scatter
-from fusionbench.claims import Supports
+from fusionbench.bench.claim_check import SWAY_RATIO, base_kind, outside_claim, rate_scatter
 from fusionbench.cli import main
-from fusionbench.drive import car_drive
-from fusionbench.imu import PRESETS, simulate
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import read_imu, write_csv, write_psins
+from fusionbench.files.imufiles import read_imu, write_csv, write_psins
+from fusionbench.methods.aligner import Site, load_method
+from fusionbench.methods.claims import Supports
+from fusionbench.simulation import earth, trajectory as tj, units
+from fusionbench.simulation.aiding import Aiding
+from fusionbench.simulation.drive import car_drive
+from fusionbench.simulation.imu import PRESETS, simulate
+from fusionbench.simulation.imudata import IMUData
 
 D = np.pi / 180
 LAT, LON, H = 47.0 * D, 8.0 * D, 400.0
@@ -138,9 +138,9 @@ def test_a_latitude_beyond_the_claim(capsys, tmp_path):
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
     """A car's drive with turns at 47 N, 150 s at 50 Hz, navigation grade, and its receiver's velocity rows at 1 and
-    0.5 Hz (0.02 m/s), as aiding CSVs (fusionbench.aidingfiles.write_csv)."""
-    from fusionbench.aidingfiles import write_csv as write_aiding
-    from fusionbench.aidingsim import AidingSpec, simulate_aiding
+    0.5 Hz (0.02 m/s), as aiding CSVs (fusionbench.files.aidingfiles.write_csv)."""
+    from fusionbench.files.aidingfiles import write_csv as write_aiding
+    from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
 
     folder = tmp_path_factory.mktemp("drive")
     tr = car_drive(LAT, LON, H, heading=1.0, duration=150.0)

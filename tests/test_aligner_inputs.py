@@ -1,17 +1,17 @@
-"""One input policy for every registered method (fusionbench.aligner_base.AlignerBase): samples with NaN, a velocity
-reference or initial attitude of the wrong shape, with NaN, or not a rotation, a latitude beyond the method's declared
-limit and a record shorter than its minimum are refused with one line naming the method and the field, before any
-work."""
+"""One input policy for every registered method (fusionbench.methods.aligner_base.AlignerBase): samples with NaN, a
+velocity reference or initial attitude of the wrong shape, with NaN, or not a rotation, a latitude beyond the method's
+declared limit and a record shorter than its minimum are refused with one line naming the method and the field, before
+any work."""
 
 import re
 
 import numpy as np
 import pytest
 
-from fusionbench import trajectory
-from fusionbench.aligner import Site, available_methods, load_method
-from fusionbench.inputs import check_inputs
-from fusionbench.imu import PRESETS, simulate
+from fusionbench.methods.aligner import Site, available_methods, load_method
+from fusionbench.methods.inputs import check_inputs
+from fusionbench.simulation import trajectory
+from fusionbench.simulation.imu import PRESETS, simulate
 
 SITE = Site.from_degrees(34.0, 108.0, 100.0)
 IMU = simulate(trajectory.Trajectory(SITE.lat, SITE.lon, SITE.h, trajectory.EulerSway(mean=np.radians([1.0, 2.0, -30.0])),
@@ -94,7 +94,7 @@ def test_a_bad_option_is_refused_when_the_method_is_built(spec, option, value, w
 
 
 def test_a_variants_bad_option_names_the_variant(tmp_path):
-    from fusionbench import scenarios
+    from fusionbench.bench import scenarios
 
     p = tmp_path / "v.toml"
     p.write_text('name = "v"\nduration_s = 30.0\nrate_hz = 50.0\nmethods = ["fast"]\n[site]\nlat_deg = 34.0\n'

@@ -21,10 +21,38 @@ def test_a_layer_importing_one_above_it_breaks_the_contract(tmp_path, monkeypatc
     conf = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
     layers = next(c for c in conf["contracts"] if c["type"] == "layers")
     text = (f'[tool.importlinter]\nroot_packages = {conf["root_packages"]!r}\n\n[[tool.importlinter.contracts]]\n'
-            f'name = "reversed"\ntype = "layers"\nlayers = {layers["layers"][::-1]!r}\n'
-            f'ignore_imports = {layers["ignore_imports"]!r}\n').replace("'", '"')
+            f'name = "reversed"\ntype = "layers"\ncontainers = {layers["containers"]!r}\n'
+            f'layers = {layers["layers"][::-1]!r}\n').replace("'", '"')
     (tmp_path / "pyproject.toml").write_text(text)
     monkeypatch.chdir(ROOT)
     assert lint(config_filename=str(tmp_path / "pyproject.toml"), no_cache=True, no_logo=True) == 1
     out = " ".join(capsys.readouterr().out.split())
     assert "reversed BROKEN" in out and "fusionbench.cli is not allowed to import" in out  # the real imports read
+
+
+def test_the_core_is_its_sub_packages_and_the_entry_modules():
+    """Every module of the core belongs to a layer of the contract: the sub-packages, and on top the command line
+    and the API (a new top-level module must be placed in a layer, not added beside them)."""
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
+    layers = next(c for c in conf["contracts"] if c["type"] == "layers")
+    named = {n.strip() for layer in layers["layers"] for n in layer.replace("|", ":").split(":")}
+    core = ROOT / "fusionbench"
+    found = {p.stem for p in core.glob("*.py") if p.stem not in ("__init__", "_moved")}
+    found |= {p.parent.name for p in core.glob("*/__init__.py")}
+    assert found == named
+
+
+def test_a_moved_module_is_found_at_its_old_path_with_a_warning():
+    """``fusionbench.imufiles`` (0.1) is ``fusionbench.files.imufiles``, the same module object, with a
+    FutureWarning."""
+    import importlib
+    import sys
+
+    from fusionbench.files import imufiles
+
+    sys.modules.pop("fusionbench.imufiles", None)
+    with pytest.warns(FutureWarning, match="fusionbench.imufiles moved to fusionbench.files.imufiles"):
+        old = importlib.import_module("fusionbench.imufiles")
+    assert old is imufiles and old.__spec__.name == "fusionbench.files.imufiles"
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("fusionbench.no_such_module")

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from fusionbench import attitude
+from fusionbench.simulation import attitude
 from tests.conftest import load_fixture
 
 D = np.pi / 180

@@ -4,10 +4,9 @@ Each defect is one ValueError line naming the field or file, what was expected a
 import numpy as np
 import pytest
 
-from fusionbench import imu
-from fusionbench import trajectory as tj
-from fusionbench.imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, IMUData
-from fusionbench.imufiles import IMUFileError, read_imu, write_npz, write_psins
+from fusionbench.files.imufiles import IMUFileError, read_imu, write_npz, write_psins
+from fusionbench.simulation import imu, trajectory as tj
+from fusionbench.simulation.imudata import MAX_RATE_RADPS, MAX_SPECIFIC_FORCE_MPS2, IMUData
 
 N = 200
 T = np.arange(1, N + 1) * 0.01
@@ -24,7 +23,7 @@ def _one_line(exc, *words):
     ("t", T[::-1], GYRO, ACCEL, ["IMUData t", "not strictly increasing", "sample 1"]),
     ("t", np.r_[np.nan, T[1:]], GYRO, ACCEL, ["IMUData t", "non-finite", "sample 0"]),
     ("t", np.r_[T[:100], T[100:] + 0.005], GYRO, ACCEL, ["IMUData t", "non-uniform time step", "sample 100",
-                                                        "fusionbench.resample.uniform_imu"]),
+                                                        "fusionbench.files.resample.uniform_imu"]),
     ("gyro", T, GYRO + 1j, ACCEL, ["IMUData gyro", "expected real numbers", "complex"]),
     ("gyro", T, np.where(np.arange(N)[:, None] == 7, np.nan, GYRO), ACCEL, ["IMUData gyro", "non-finite", "sample 7"]),
     ("gyro", T, GYRO + 1e6, ACCEL, ["IMUData gyro", f"beyond the {MAX_RATE_RADPS:g} rad/s", "sample 0, axis x"]),

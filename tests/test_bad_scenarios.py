@@ -2,7 +2,7 @@
 
 import pytest
 
-from fusionbench import scenarios
+from fusionbench.bench import scenarios
 
 BASE = """
 name = "p"

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from baselines.kalman import KalmanAligner
-from fusionbench import attitude, earth, metrics, units
-from fusionbench import trajectory as tj
-from fusionbench.aligner import Site
-from fusionbench.imu import (
+from fusionbench.methods.aligner import Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import (
     PRESETS,
     IMUSpec,
     SensorErrors,

@@ -6,14 +6,15 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from fusionbench import attitude, bound, earth, metrics, units
-# fusionbench.imu before fusionbench.aidingsim: imported first, aidingsim's imports are circular
-from fusionbench.imu import PRESETS, IMUSpec, NoiseSchedule, SensorErrors
+from fusionbench.scoring import bound, metrics
+from fusionbench.simulation import attitude, earth, units
+# fusionbench.simulation.imu before fusionbench.simulation.aidingsim: imported first, aidingsim's imports are circular
+from fusionbench.simulation.imu import PRESETS, IMUSpec, NoiseSchedule, SensorErrors
 
-from fusionbench.aiding_geometry import lever_offset, lever_velocity  # noqa: I001
-from fusionbench.aidingsim import AidingSpec
-from fusionbench.aligner import Site
-from fusionbench.drive import car_drive
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation.aiding_geometry import lever_offset, lever_velocity  # noqa: I001
+from fusionbench.simulation.aidingsim import AidingSpec
+from fusionbench.simulation.drive import car_drive
 
 D = np.pi / 180
 LAT = 34 * D

@@ -7,13 +7,13 @@ import pytest
 from scipy.integrate import quad
 from scipy.linalg import expm
 
-from fusionbench import attitude, bound, bound_model, earth, metrics, units
-from fusionbench import trajectory as tj
-from fusionbench.translation import Segment, Translation, VelocityDisturbance
-# fusionbench.imu before fusionbench.aidingsim: imported first, aidingsim's imports are circular
-from fusionbench.imu import PRESETS, IMUSpec, SensorErrors
+from fusionbench.scoring import bound, bound_model, metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.translation import Segment, Translation, VelocityDisturbance
+# fusionbench.simulation.imu before fusionbench.simulation.aidingsim: imported first, aidingsim's imports are circular
+from fusionbench.simulation.imu import PRESETS, IMUSpec, SensorErrors
 
-from fusionbench.aidingsim import AidingSpec  # noqa: I001
+from fusionbench.simulation.aidingsim import AidingSpec  # noqa: I001
 
 D = np.pi / 180
 LAT, LON, H = 34 * D, 1.9, 450.0
@@ -33,7 +33,7 @@ def _truth_runs(runs, T, step, vs, vdt, rms, seed):
     """Simulated step averages of the reference's measured velocity error (runs, M, 2), m/s, and the true
     misalignment at the end (runs, 3), rad, built here from the continuous error model of a fixed base: phi and dv
     from scipy's expm (Van Loan) over fine steps of step/10, the disturbance of each run a
-    :class:`fusionbench.translation.VelocityDisturbance` (its own frequencies and phases), its acceleration
+    :class:`fusionbench.simulation.translation.VelocityDisturbance` (its own frequencies and phases), its acceleration
     entering the velocity error through the specific force (``[a_d x] phi``, midpoint rule) and its velocity the
     measurement (exact step averages from its displacement); the reference's white noise averaged over the step."""
     rng = np.random.default_rng(seed)

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusionbench import attitude, trajectory as tj, units
-from fusionbench.imu import PRESETS, simulate
-from fusionbench.imufiles import write_csv
+from fusionbench.files.imufiles import write_csv
+from fusionbench.simulation import attitude, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, simulate
 
 D = np.pi / 180
 
@@ -100,13 +100,14 @@ def test_align_refuses_an_impossible_latitude_and_an_unknown_method(tmp_path):
 
 def test_run_check_and_regression(tmp_path):
     out = tmp_path / "rep"
-    r = cli("run", "static-34n", "--quick", "--runs", 2, "--out", out, "--methods", "coarse,fusionbench.coarse:InertialCoarseAligner")
+    r = cli("run", "static-34n", "--quick", "--runs", 2, "--out", out, "--methods",
+            "coarse,fusionbench.methods.coarse:InertialCoarseAligner")
     assert r.returncode == 0, r.stderr
     m = json.loads((out / "metrics.json").read_text())
     assert m["quick"] is True and m["runs"] == 2
     # a method given by its import path is labelled by its name, and the report says which path that was
     assert set(m["methods"]) == {"coarse", "coarse-i0"}
-    assert "`coarse-i0` (`fusionbench.coarse:InertialCoarseAligner`)" in (out / "report.md").read_text()
+    assert "`coarse-i0` (`fusionbench.methods.coarse:InertialCoarseAligner`)" in (out / "report.md").read_text()
     assert (out / "errors.png").exists()
     _check_provenance(m["provenance"], runs=2)
     ref = tmp_path / "ref.json"
@@ -137,7 +138,7 @@ def test_check_finds_the_installed_reference_of_the_runs_size_from_any_directory
 
 
 def test_check_tolerance_admits_one_run_moving_by_one_standard_deviation():
-    from fusionbench.check import compare
+    from fusionbench.bench.check import compare
 
     def metrics(rms, std=3.0):
         stat = {"mean": 0.0, "std": std, "rms": rms, "max_abs": rms}
@@ -190,8 +191,8 @@ def _check_provenance(p, runs):
 @pytest.mark.parametrize("quick", [True, False])
 def test_installed_references_cover_every_builtin_scenario_at_its_size(quick):
     # a reference made at another size than the scenario's own would make `check` refuse every user's run
-    from fusionbench import scenarios
-    from fusionbench.check import packaged_reference
+    from fusionbench.bench import scenarios
+    from fusionbench.bench.check import packaged_reference
 
     folder = packaged_reference(quick)
     for name in scenarios.builtin_names(templates=False):  # what run all runs (a template has no reference)

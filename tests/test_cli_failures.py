@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from fusionbench import reportdir
-from fusionbench.check import packaged_reference
+from fusionbench.bench.check import packaged_reference
 from fusionbench.cli import main
+from fusionbench.files import reportdir
 
 TINY = """name = "tiny-cli"
 description = "30 s static at 50 Hz, 2 runs"
@@ -38,7 +38,7 @@ import os
 import time
 from pathlib import Path
 
-from fusionbench.coarse import CoarseAligner
+from fusionbench.methods.coarse import CoarseAligner
 
 
 class InitRaises(CoarseAligner):
@@ -224,9 +224,9 @@ def test_align_names_a_failing_user_method_in_one_line(capsys, user_path, record
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     """A 60-s stationary CSV recording at 50 Hz."""
-    from fusionbench import trajectory as tj
-    from fusionbench.imu import PRESETS, simulate
-    from fusionbench.imufiles import write_csv
+    from fusionbench.files.imufiles import write_csv
+    from fusionbench.simulation import trajectory as tj
+    from fusionbench.simulation.imu import PRESETS, simulate
 
     tr = tj.Trajectory(0.6, 0.0, 0.0, tj.EulerSway(mean=(0.0, 0.0, 1.0)), duration=60.0)
     data = simulate(tr, PRESETS["navigation"].noise_free(), 0.02)
@@ -372,12 +372,12 @@ def test_an_empty_out_folder_is_used(capsys, tmp_path, tiny):
 
 
 def test_an_unwritable_out_fails_at_once_before_any_work(capsys, tmp_path, tiny, monkeypatch):
-    import fusionbench.experiment
+    import fusionbench.bench.experiment
 
     def no_work(*args, **kwargs):
         raise AssertionError("a Monte Carlo started")
 
-    monkeypatch.setattr(fusionbench.experiment, "run_scenario", no_work)
+    monkeypatch.setattr(fusionbench.bench.experiment, "run_scenario", no_work)
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
     for out in (blocker / "rep", blocker / "deeper" / "rep", blocker):
@@ -394,9 +394,9 @@ def test_an_unwritable_out_fails_at_once_before_any_work(capsys, tmp_path, tiny,
 
 
 def test_run_all_refuses_a_single_scenario_report_as_its_folder(capsys, tmp_path, monkeypatch):
-    import fusionbench.experiment
+    import fusionbench.bench.experiment
 
-    monkeypatch.setattr(fusionbench.experiment, "run_scenario", None)
+    monkeypatch.setattr(fusionbench.bench.experiment, "run_scenario", None)
     before = fake_report(tmp_path / "rep")
     status, _, err = fb(capsys, "run", "all", "--out", tmp_path / "rep")
     assert status == 2
@@ -441,7 +441,7 @@ def test_the_current_folder_is_never_replaced(tmp_path, monkeypatch):
 
 #: Assembles a report, touches argv[2] and waits to be killed.
 KILLED = """import pathlib, sys, time
-from fusionbench import reportdir
+from fusionbench.files import reportdir
 with reportdir.staged(sys.argv[1]) as tmp:
     (tmp / "metrics.json").write_text("half a report")
     pathlib.Path(sys.argv[2]).touch()
@@ -490,12 +490,12 @@ def test_a_killed_runs_leftover_is_removed_by_the_next_run_and_a_live_runs_kept(
 
 
 def test_run_all_removes_each_scenarios_leftovers_before_any_work(capsys, tmp_path, monkeypatch):
-    import fusionbench.experiment
+    import fusionbench.bench.experiment
 
     def stop(*args, **kwargs):
         raise ValueError("stopped after the folders were checked")
 
-    monkeypatch.setattr(fusionbench.experiment, "run_scenario", stop)
+    monkeypatch.setattr(fusionbench.bench.experiment, "run_scenario", stop)
     out = tmp_path / "all"
     out.mkdir()
     live = [leftover(out, name, what, os.getpid()).name
@@ -531,11 +531,13 @@ def test_only_the_targets_own_leftovers_are_swept(tmp_path):
 
 @pytest.mark.parametrize("command", ["identify", "consistency"])
 def test_identify_and_consistency_refuse_a_folder_of_other_files(capsys, tmp_path, recording, command, monkeypatch):
-    import fusionbench.consistency
-    import fusionbench.identify
+    import fusionbench.recording.consistency
+    import fusionbench.recording.identify
 
-    monkeypatch.setattr(fusionbench.identify, "identify", lambda *a, **k: pytest.fail("identified before the check"))
-    monkeypatch.setattr(fusionbench.consistency, "consistency", lambda *a, **k: pytest.fail("aligned before the check"))
+    monkeypatch.setattr(fusionbench.recording.identify, "identify",
+                        lambda *a, **k: pytest.fail("identified before the check"))
+    monkeypatch.setattr(fusionbench.recording.consistency, "consistency",
+                        lambda *a, **k: pytest.fail("aligned before the check"))
     out = tmp_path / "mine"
     out.mkdir()
     (out / "thesis.tex").write_text("years of work")
@@ -607,14 +609,14 @@ def test_check_refuses_a_metrics_file_that_is_not_an_object(capsys, run_and_ref)
 
 
 def test_every_installed_reference_has_the_shape_check_reads():
-    from fusionbench.check import load_metrics
+    from fusionbench.bench.check import load_metrics
 
     for path in sorted(packaged_reference(True).parent.glob("*/*.json")):
         load_metrics(path, "reference metrics")
 
 
 def test_check_ignores_a_folder_set_aside(tmp_path, run_and_ref):
-    from fusionbench.check import metrics_files
+    from fusionbench.bench.check import metrics_files
 
     run, _ = run_and_ref
     (tmp_path / "all").mkdir()

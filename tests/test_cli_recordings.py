@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from fusionbench import attitude, trajectory as tj, units
 from fusionbench.cli import main
-from fusionbench.drive import car_drive
-from fusionbench.imu import PRESETS, simulate
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import write_csv, write_psins
+from fusionbench.files.imufiles import write_csv, write_psins
+from fusionbench.simulation import attitude, trajectory as tj, units
+from fusionbench.simulation.drive import car_drive
+from fusionbench.simulation.imu import PRESETS, simulate
+from fusionbench.simulation.imudata import IMUData
 
 D = np.pi / 180
 LAT, LON, H = 47.0 * D, 8.0 * D, 400.0
@@ -145,11 +145,11 @@ def _aiding_csv(path, t, v):
 
 @pytest.fixture(scope="module")
 def car(tmp_path_factory):
-    """A car's drive with turns (fusionbench.drive.car_drive: 0.5 m/s^2 to 10 m/s, 40-deg turns at 6 m/s) at 34 N,
-    108 E, 400 m, heading 57 deg, 300 s at 50 Hz, navigation grade (seed 1), as the contract CSV (rates at the
+    """A car's drive with turns (fusionbench.simulation.drive.car_drive: 0.5 m/s^2 to 10 m/s, 40-deg turns at 6 m/s)
+    at 34 N, 108 E, 400 m, heading 57 deg, 300 s at 50 Hz, navigation grade (seed 1), as the contract CSV (rates at the
     interval ends); and its receiver at the IMU's rate (0.02 m/s white noise, antenna LEVER m right, front, up) as an
     aiding CSV of the rows valid at the file's samples after its first (the record's initial state)."""
-    from fusionbench.aidingsim import AidingSpec, simulate_aiding  # after fusionbench.imu: aidingsim imported first
+    from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding  # after simulation.imu: imported first
     # meets imusim and imu importing each other half-initialised
 
     folder = tmp_path_factory.mktemp("car")

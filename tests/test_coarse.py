@@ -5,13 +5,14 @@ import re
 import numpy as np
 import pytest
 
-from fusionbench import coarse
-from fusionbench.coarse import CoarseAligner, InertialCoarseAligner
-from fusionbench.coarse_inertial import gravity_integral_inertial
-from fusionbench import attitude, earth, metrics, motion, trajectory as tj, units
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.imudata import IMUData
+from fusionbench.methods import coarse, coarse_i0, motion
+from fusionbench.methods.aligner import Site
+from fusionbench.methods.coarse import CoarseAligner, InertialCoarseAligner
+from fusionbench.methods.coarse_inertial import gravity_integral_inertial
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.simulation.imudata import IMUData
 from tests.conftest import agree_to_rounding, load_fixture
 from tests.oracles.coarse import body_pass_numpy
 
@@ -118,7 +119,7 @@ def test_a_noisy_reference_costs_what_the_block_fit_leaves():
     # rotation shows only in the earth-rotation curvature g W cosL t^2 / 2 (5-26 m/s over the fit blocks),
     # 95 % of which a tilt (linear in t) mimics, so sigma = 2.7 arcmin about it and fE / fU = 0.1 of that
     # in the east level: a twentieth of a degree. Measured rms over 8 runs: 0.24, 0.008, 2.8 arcmin.
-    from fusionbench.coarse_inertial import velocity_integral_inertial
+    from fusionbench.methods.coarse_inertial import velocity_integral_inertial
 
     runs = 8
     tr, data, vref = _accelerating(0.1, 0.1, runs=runs, seed=3)
@@ -136,7 +137,7 @@ def test_a_noisy_reference_costs_what_the_block_fit_leaves():
 def test_the_velocity_integral_is_the_integral_of_the_true_specific_force_in_i0():
     # V_i0 from the reference (motion terms, Coriolis, turning gravity) against the specific force of the
     # truth resolved in i0 and integrated numerically (Simpson on a 0.01-s grid)
-    from fusionbench.coarse_inertial import velocity_integral_inertial
+    from fusionbench.methods.coarse_inertial import velocity_integral_inertial
 
     tr = tj.accelerating(-45 * D, mean=(0.0, 0.0, 0.0), accel=2.0, direction=(0.6, 0.8, 0.0), duration=100.0)
     dt = 0.01
@@ -158,7 +159,7 @@ def _static_or_swaying(kind, T, spec, heading_deg=30.0, lat_deg=34.0):
         tr = tj.moored(lat, mean=mean, disturbance_rms=0.05, duration=T)
     else:
         tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=mean), duration=T)
-    from fusionbench.imu import PRESETS
+    from fusionbench.simulation.imu import PRESETS
 
     return tr, simulate(tr, PRESETS[spec], 0.02, runs=2, seed=1)
 
@@ -183,7 +184,7 @@ def test_stationary_and_swaying_bases_pass_the_motion_check_with_margin(kind, sp
 @pytest.mark.parametrize("start_frac", [0.25, 0.5])
 def test_an_acceleration_during_the_record_is_refused_naming_the_method_and_the_figure(start_frac):
     # 0.01 g east from a quarter or half of a 60-s record on: the velocity changes by 4.4 or 2.9 m/s, which no
-    # rotation of the gravity integral explains (the input policy's check, fusionbench.motion: measured 0.44 and
+    # rotation of the gravity integral explains (the input policy's check, fusionbench.methods.motion: measured 0.44 and
     # 0.50 m/s against 0.17)
     T = 60.0
     tr = tj.accelerating(34 * D, mean=(0.5 * D, -1 * D, -30 * D), accel=0.01 * 9.80665, start=start_frac * T, duration=T)
@@ -212,7 +213,7 @@ def test_a_constant_acceleration_is_a_tilt_but_at_0_1_g_the_specific_force_shows
     # 0.1 g, less the Eotvos effect of the eastward speed a t: the vertical integral loses
     # int (2 W cosL a t + (a t)^2 / R) = W cosL a t^2 + a^2 t^3 / 3R against g t, weighted by t^2 in the
     # scale over the fit times (30-60 s): 0.3 mg. At 0.01 g, 0.05 - 0.03 mg: below any sensor error. The input
-    # policy refuses the 0.1 g record on its own excess (fusionbench.motion, over the whole record: 4.7 mg); the
+    # policy refuses the 0.1 g record on its own excess (fusionbench.methods.motion, over the whole record: 4.7 mg); the
     # fit's diagnostic is read past it, from the method itself (_align).
     T = 60.0
     for a_g, refused in ((0.1, True), (0.01, False)):
@@ -238,8 +239,8 @@ def test_the_compiled_pass_gives_the_numpy_oracles_attitudes(case, monkeypatch):
     sample in another order, so V differs by at most N eps |V| (|V| <= g T); the azimuth rests on the earth's turning
     of gravity over the fit, g W cosL t^2 / 2 at half the record, so the attitudes differ by at most their ratio
     (3e-9 rad here; measured 2e-13 to 2e-11). One sample late, the sway turns the attitude by about 1e-3 rad."""
-    from fusionbench.aidingsim import AidingSpec, simulate_aiding
-    from fusionbench.drive import car_drive
+    from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
+    from fusionbench.simulation.drive import car_drive
 
     lat, T = np.radians(34.0), 120.0
     aiding = vref = None
@@ -256,7 +257,7 @@ def test_the_compiled_pass_gives_the_numpy_oracles_attitudes(case, monkeypatch):
     site = Site(lat, 0.0, 0.0)
     fast = InertialCoarseAligner().align(data, site, vref=vref, aiding=aiding)
     calls = []
-    monkeypatch.setattr(coarse, "body_pass", lambda *a: calls.append(body_pass_numpy(*a)))
+    monkeypatch.setattr(coarse_i0, "body_pass", lambda *a: calls.append(body_pass_numpy(*a)))
     ref = InertialCoarseAligner().align(data, site, vref=vref, aiding=aiding)
     assert len(calls) == 1  # through the oracle
     np.testing.assert_array_equal(fast.t, ref.t)

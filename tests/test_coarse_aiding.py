@@ -1,22 +1,22 @@
 """coarse-i0 with aiding at a receiver's epochs: velocity or position rows, a lever arm, a latency, outages and rows at
-rest, on a car that turns (fusionbench.drive.car_drive) and on seed 001's accelerating base (0.1 g for 300 s)."""
+rest, on a car that turns (fusionbench.simulation.drive.car_drive) and on seed 001's accelerating base (0.1 g for 300
+s)."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from fusionbench import attitude, units
-from fusionbench import trajectory as tj
-from fusionbench.aiding import Aiding
-from fusionbench.aidingsim import AidingSpec, simulate_aiding
-from fusionbench.aligner import Site
-from fusionbench.coarse import InertialCoarseAligner
-from fusionbench.coarse_aided import aiding_rows, fit_blocks, place
-from fusionbench.coarse_inertial import c_n_i0, cumulative_trapezoid, velocity_integral_inertial
-from fusionbench.drive import car_drive
-from fusionbench.imu import IMUSpec, simulate
-from fusionbench.imudata import IMUData
+from fusionbench.methods.aligner import Site
+from fusionbench.methods.coarse import InertialCoarseAligner
+from fusionbench.methods.coarse_aided import aiding_rows, fit_blocks, place
+from fusionbench.methods.coarse_inertial import c_n_i0, cumulative_trapezoid, velocity_integral_inertial
+from fusionbench.simulation import attitude, trajectory as tj, units
+from fusionbench.simulation.aiding import Aiding
+from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
+from fusionbench.simulation.drive import car_drive
+from fusionbench.simulation.imu import IMUSpec, simulate
+from fusionbench.simulation.imudata import IMUData
 
 D = np.pi / 180
 LAT, T = 34 * D, 300.0

@@ -5,13 +5,15 @@ passes only by refusing, the figures do not depend on the worker count, and ``ch
 import numpy as np
 import pytest
 
-from fusionbench.coarse import CoarseAligner
-from fusionbench import attitude, metrics, scenarios, units
-from fusionbench.claims import MAX_BIAS_TO_EARTH_RATE, Supports, azimuth_bias_ratio
-from fusionbench.check import compare
-from fusionbench.fields import FieldError
-from fusionbench.imu import PRESETS
-from fusionbench.experiment import run_scenario
+from fusionbench.bench import scenarios
+from fusionbench.bench.check import compare
+from fusionbench.bench.experiment import run_scenario
+from fusionbench.methods.claims import MAX_BIAS_TO_EARTH_RATE, Supports, azimuth_bias_ratio
+from fusionbench.methods.coarse import CoarseAligner
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, units
+from fusionbench.simulation.fields import FieldError
+from fusionbench.simulation.imu import PRESETS
 
 OFFSET = "tests.test_conformance:OffsetCoarse"
 
@@ -139,7 +141,7 @@ def test_check_guards_the_cells(mini):
 
 
 def test_report_has_the_scoreboard(mini, tmp_path):
-    from fusionbench.experiment import write_scenario_report
+    from fusionbench.bench.experiment import write_scenario_report
 
     _, out = mini
     write_scenario_report(out, tmp_path)
@@ -258,9 +260,9 @@ def test_on_a_sway_the_levels_pass_on_the_stationary_limit_or_on_the_bias_limit(
     # on the stationary limit; a level off both fails
     from types import SimpleNamespace
 
-    from fusionbench import bound
-    from fusionbench.conformance import _cell, sway_level_limit
-    from fusionbench.conformance_file import condition_bound, condition_scenario
+    from fusionbench.bench.conformance_file import condition_bound, condition_scenario
+    from fusionbench.experiments.conformance import _cell, sway_level_limit
+    from fusionbench.scoring import bound
 
     p = tmp_path / "sway-tac.toml"
     p.write_text(SWAY_TAC)

@@ -1,5 +1,5 @@
-"""Consistency without truth (fusionbench.consistency): the carry is exact and a one-sample timing error shows, a
-constant bias does not show, white noise shows as the attainable bound says, and bad input is one clear error.
+"""Consistency without truth (fusionbench.recording.consistency): the carry is exact and a one-sample timing error
+shows, a constant bias does not show, white noise shows as the attainable bound says, and bad input is one clear error.
 
 Every expected number comes from the trajectory's truth composed with the earth's turn, from the error model of
 a stationary alignment, or from the bound; tolerances are the strapdown's own accuracy (0.01 arcsec, as
@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from fusionbench import attitude, earth, imu as imu_mod, metrics, trajectory as tj, units
-from fusionbench.aligner import AlignmentResult, Site
-from fusionbench.consistency import carry, consistency
-from fusionbench.consistency_report import summary_lines, to_json, write_consistency_report
-from fusionbench.imudata import IMUData
-from fusionbench.translation import Translation, VelocityDisturbance
+from fusionbench.methods.aligner import AlignmentResult, Site
+from fusionbench.recording.consistency import carry, consistency
+from fusionbench.recording.consistency_report import summary_lines, to_json, write_consistency_report
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, imu as imu_mod, trajectory as tj, units
+from fusionbench.simulation.imudata import IMUData
+from fusionbench.simulation.translation import Translation, VelocityDisturbance
 
 D = units.DEG
 SITE = Site(34 * D, 108 * D, 450.0)
@@ -109,7 +110,7 @@ class _Oracle:
 @pytest.fixture
 def oracles(monkeypatch):
     """``oracle:Exact`` and ``oracle:Late`` (one sample late) on a swaying trajectory, importable by
-    :func:`fusionbench.aligner.load_method` as module:Class paths."""
+    :func:`fusionbench.methods.aligner.load_method` as module:Class paths."""
     tr = swaying(160.0)
     mod = types.ModuleType("consistency_oracle")
     mod.Exact = type("Exact", (_Oracle,), {"name": "exact", "trajectory": tr})
@@ -277,7 +278,7 @@ def _snapshot(folder):
 
 def test_the_report_folder_is_replaced_whole_or_left_as_it_was(record, tmp_path, monkeypatch):
     """A figure that fails half-written leaves the previous output exactly as it was; a new one replaces it."""
-    from fusionbench import figures
+    from fusionbench.reports import figures
 
     res = consistency(record, SITE, ["coarse"], window_s=50.0)
     out = tmp_path / "out"

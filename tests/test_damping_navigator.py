@@ -10,10 +10,11 @@ from scipy.spatial.transform import Rotation
 from damping import network as N
 from damping import qmap
 from damping.navigator import DampedNavigator, q_for_damping
-from fusionbench import earth, imu, metrics, trajectory, units
-from fusionbench.aligner import Navigator, Site
-from fusionbench.imudata import IMUData
-from fusionbench.translation import Translation
+from fusionbench.methods.aligner import Navigator, Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import earth, imu, trajectory, units
+from fusionbench.simulation.imudata import IMUData
+from fusionbench.simulation.translation import Translation
 
 
 @pytest.mark.parametrize("q", [1.0, 2.5, 6.5])

@@ -6,7 +6,7 @@ from scipy import signal
 from scipy.optimize import minimize_scalar
 
 from damping import network as N
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 
 @pytest.mark.parametrize("q", [1.5, 3.0, 8.0])

@@ -5,7 +5,7 @@ import pytest
 
 from damping.network import simulated_peak_error
 from damping.qmap import QMap, default_accels, training_data
-from fusionbench.units import DEG
+from fusionbench.simulation.units import DEG
 
 LIMIT = 0.03 * DEG
 

@@ -25,10 +25,12 @@ from baselines.rolling import experiment as rolling_experiment
 from baselines.rolling import model as rolling_model
 from baselines.rolling import scheme as rolling_scheme
 from baselines.rolling import spec as rolling_spec
-from fusionbench import aligner, conformance_file, imu, scenarios, units
-from fusionbench.experiment import available_experiments, load_experiment
-from fusionbench.scenarios import tables as scenario_tables
+from fusionbench.bench import conformance_file, scenarios
+from fusionbench.bench.experiment import available_experiments, load_experiment
+from fusionbench.bench.scenarios import tables as scenario_tables
 from fusionbench.features import compare as feat_compare, jump as feat_jump, paper as feat_paper, windows as feat_windows
+from fusionbench.methods import aligner
+from fusionbench.simulation import imu, units
 
 ROOT = Path(__file__).parents[1]
 DOC_PATH = ROOT / "docs" / "scenarios.md"

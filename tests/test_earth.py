@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fusionbench import earth, units
+from fusionbench.simulation import earth, units
 
 
 def test_gravity_equator_and_pole_are_somigliana_constants():

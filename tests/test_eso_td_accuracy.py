@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 
 from adrc.moving_base import ESOTDAligner
-from fusionbench.coarse import InertialCoarseAligner
+from fusionbench.methods.coarse import InertialCoarseAligner
 from baselines.kalman import KalmanAligner
-from fusionbench import attitude, earth, metrics, trajectory as tj, units
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.imudata import IMUData
+from fusionbench.methods.aligner import Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.simulation.imudata import IMUData
 from tests.conftest import load_fixture
 from tests.test_moving_base import moving_base_limits
 
@@ -33,7 +34,7 @@ ARCMIN = units.ARCMIN
 def _constant_biases(spec, runs, seed):
     """Each run's constant gyro and accelerometer biases (body, SI): the fixed part plus its per-run draw,
     as the simulator draws them."""
-    from fusionbench.imusim import _RunState
+    from fusionbench.simulation.imusim import _RunState
 
     states = [_RunState(spec, seed, r) for r in range(runs)]
     return (np.array([st.sensors["gyro"]["bias"] for st in states]),

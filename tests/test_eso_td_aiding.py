@@ -1,6 +1,7 @@
 """eso-td with aiding read at the rows' times of validity (adrc.eso_td_rows): a car driving with turns
-(fusionbench.drive.car_drive) and the rows a simulated receiver delivers (fusionbench.aidingsim): velocity at 10 or
-1 Hz, positions at 1 Hz, a 1.5-m lever arm, a 50-ms latency, a 60-s outage.
+(fusionbench.simulation.drive.car_drive) and the rows a simulated receiver delivers
+(fusionbench.simulation.aidingsim): velocity at 10 or 1 Hz, positions at 1 Hz, a 1.5-m lever arm, a 50-ms latency, a
+60-s outage.
 
 The car waits 0.04 s before its first leg, so that no turn starts or ends exactly at a row's epoch: the simulator
 gives the antenna's velocity there with the new leg's rate (a step the real rate never makes), the aligner with the
@@ -16,14 +17,14 @@ from adrc.eso_td_rows import POSITION_SPAN_S, StepRows
 from adrc import moving_base
 from adrc.moving_base import PAPER_PARAMETERS, ESOTDAligner
 from baselines.kalman import KalmanAligner
-from fusionbench import attitude, units
-from fusionbench.aiding import Aiding
-from fusionbench.aiding_geometry import enu_offset
-from fusionbench.aligner import Site
-from fusionbench.claims import supports
-from fusionbench.imu import PRESETS, simulate
-from fusionbench.aidingsim import AidingSpec, simulate_aiding
-from fusionbench.drive import car_drive
+from fusionbench.methods.aligner import Site
+from fusionbench.methods.claims import supports
+from fusionbench.simulation import attitude, units
+from fusionbench.simulation.aiding import Aiding
+from fusionbench.simulation.aiding_geometry import enu_offset
+from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
+from fusionbench.simulation.drive import car_drive
+from fusionbench.simulation.imu import PRESETS, simulate
 from tests.conftest import engines_agree
 from tests.oracles.eso_td import measure, run_numpy
 

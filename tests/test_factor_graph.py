@@ -10,10 +10,11 @@ import pytest
 
 from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner
 from baselines.graph_support import keyframe_counts
-from fusionbench import attitude, earth, metrics, trajectory as tj, units
-from fusionbench.aligner import Aligner, Site
-from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.imufiles import write_csv
+from fusionbench.files.imufiles import write_csv
+from fusionbench.methods.aligner import Aligner, Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
 
 D = np.pi / 180
 LAT = 34 * D
@@ -191,7 +192,7 @@ def test_an_exact_reference_leaves_a_tactical_heading_within_its_bound():
     # (50 ug/sqrt(Hz)) leaves in its prediction; at 60 N, where the heading is nearly free against the east gyro bias,
     # the graph then drifted 10 to 34 deg from the limit (4.9 attainable bounds, 20 runs of 300 s at 50 Hz); with the
     # IMU's share in every tile 0.9. Here (25 Hz, 200 s) 3.02 without it, 0.82 with it
-    from fusionbench import bound
+    from fusionbench.scoring import bound
 
     lat, runs, dt, T = 60 * D, 6, 0.04, 200.0
     tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(1 * D, -2 * D, 179 * D)), duration=T)
@@ -270,7 +271,7 @@ def test_a_spec_whose_accelerometer_bias_walks_and_gyro_bias_does_not_still_move
     stop at its start: the graph returned the coarse alignment it started from, to the last digit. It must iterate,
     leave that start, and land within the attainable bound's reach of the limit (RMS over 4 runs of the azimuth
     about the limit under 2.5 bounds; 1 is optimal, 4 runs scatter an RMS by about 35 %)."""
-    from fusionbench.coarse import InertialCoarseAligner
+    from fusionbench.methods.coarse import InertialCoarseAligner
 
     nav = PRESETS["navigation"]
     spec = IMUSpec(name="identified-like", gyro=SensorErrors(white=nav.gyro.white, bias_sigma=nav.gyro.bias),

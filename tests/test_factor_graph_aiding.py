@@ -1,7 +1,7 @@
 """The factor graphs with aiding at a receiver's epochs (velocity and/or position rows, a lever arm, a latency, an
-outage) on a car's drive with turns (:func:`fusionbench.drive.car_drive`,
-:func:`fusionbench.aidingsim.simulate_aiding`): exact with a perfect IMU and exact rows and wrong when the lever
-arm, the latency or the epochs are misread; within their own marginal sigma on noisy data; the robust and adaptive
+outage) on a car's drive with turns (:func:`fusionbench.simulation.drive.car_drive`,
+:func:`fusionbench.simulation.aidingsim.simulate_aiding`): exact with a perfect IMU and exact rows and wrong when the
+lever arm, the latency or the epochs are misread; within their own marginal sigma on noisy data; the robust and adaptive
 graphs on rows; the rows' arithmetic against brute force."""
 
 from dataclasses import replace
@@ -14,13 +14,13 @@ from baselines.graph_adaptive import AdaptiveFactorGraphAligner
 from baselines.graph_aiding import build_problem, path_offsets, recording_rows, tile_data
 from baselines.graph_rows import at_rows, integral_at_rows, mean_at_rows, tile_sums, tiles
 from baselines.graph_support import keyframe_counts
-from fusionbench import attitude, earth, units
-from fusionbench.aiding import Aiding
-from fusionbench.aiding_geometry import bracket, enu_offset
-from fusionbench.aidingsim import AidingSpec, simulate_aiding
-from fusionbench.aligner import Site
-from fusionbench.drive import car_drive
-from fusionbench.imu import PRESETS, IMUSpec, NoiseSchedule, simulate
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation import attitude, earth, units
+from fusionbench.simulation.aiding import Aiding
+from fusionbench.simulation.aiding_geometry import bracket, enu_offset
+from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
+from fusionbench.simulation.drive import car_drive
+from fusionbench.simulation.imu import PRESETS, IMUSpec, NoiseSchedule, simulate
 
 D = np.pi / 180
 LAT = 34 * D

@@ -14,12 +14,14 @@ from baselines.graph_adaptive import AdaptiveFactorGraphAligner
 from baselines.graph_rows import axis_means, tile_error, tile_factors, tile_sums, tiles
 from baselines.graph_support import Posterior
 from baselines.kalman import KalmanAligner
-from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
-from fusionbench.aidingsim import simulate_aiding
-from fusionbench.aligner import Site
-from fusionbench.imu import (PRESETS, IMUSpec, NoiseSchedule, SensorErrors, VelocityReferenceSpec, simulate,
+from fusionbench.bench import scenarios
+from fusionbench.methods.aligner import Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.aidingsim import simulate_aiding
+from fusionbench.simulation.imu import (PRESETS, IMUSpec, NoiseSchedule, SensorErrors, VelocityReferenceSpec, simulate,
                             simulate_vref)
-from fusionbench.translation import Translation, VelocityDisturbance
+from fusionbench.simulation.translation import Translation, VelocityDisturbance
 
 D = np.pi / 180
 LAT = 34 * D

@@ -7,15 +7,15 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from fusionbench import figure_events as fev
-from fusionbench import figures as fg
-from fusionbench import scenarios, units
-from fusionbench.report import _table, azimuth_figure, error_figure
-from fusionbench.runner import MethodOutcome, RunOutput
+from fusionbench.bench import scenarios
+from fusionbench.bench.runner import MethodOutcome, RunOutput
+from fusionbench.reports import figure_events as fev, figures as fg
+from fusionbench.reports.report import _table, azimuth_figure, error_figure
+from fusionbench.simulation import units
 
 
 def _toml(name):
-    return tomllib.loads((resources.files("fusionbench.scenarios") / f"{name}.toml").read_text())
+    return tomllib.loads((resources.files("fusionbench.bench.scenarios") / f"{name}.toml").read_text())
 
 
 def _run(scn_name, histories, duration, limits_arcmin=(0.1, -0.1, -3.0)):

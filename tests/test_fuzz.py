@@ -13,8 +13,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fusionbench import metrics, scenarios
-from fusionbench.imufiles import IMUFileError, read_imu
+from fusionbench.bench import scenarios
+from fusionbench.files.imufiles import IMUFileError, read_imu
+from fusionbench.scoring import metrics
 
 #: Examples per property (FUZZ_EXAMPLES=2000 for a deeper search than the suite's).
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))

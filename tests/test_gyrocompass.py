@@ -10,11 +10,13 @@ import pytest
 
 from adrc.gyrocompass import ADRCGyrocompass, ADRCPaper
 from baselines.gyrocompass import PIDGyrocompass
-from fusionbench import attitude, earth, metrics, scenarios, trajectory as tj, units
-from fusionbench.aligner import Site
-from fusionbench.compass import AzimuthFit, correct_azimuth
-from fusionbench.imu import PRESETS, IMUSpec, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.imufiles import write_csv
+from fusionbench.bench import scenarios
+from fusionbench.files.imufiles import write_csv
+from fusionbench.methods.aligner import Site
+from fusionbench.methods.compass import AzimuthFit, correct_azimuth
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, IMUSpec, VelocityReferenceSpec, simulate, simulate_vref
 from tests.conftest import engines_agree
 from tests.oracles import adrc_gyrocompass, pid_gyrocompass
 
@@ -23,7 +25,7 @@ D = np.pi / 180
 
 @pytest.mark.parametrize("az_deg", [180.0, -179.0, 90.0, 3.0, -120.0])
 def test_eq19_recovers_the_azimuth_from_steady_commands(az_deg):
-    # eq. 19 (the module docstring of fusionbench.compass; AzimuthFit is its least-squares form) inverts
+    # eq. 19 (the module docstring of fusionbench.methods.compass; AzimuthFit is its least-squares form) inverts
     # the steady state of eqs. 14-15 with the level coupling: ax' = ay' = 0
     lat, az, ax, ay = 34 * D, az_deg * D, 2e-4, -3e-4
     wN, wU = earth.OMEGA_IE * np.cos(lat), earth.OMEGA_IE * np.sin(lat)
@@ -197,7 +199,7 @@ def test_cli_aligns_a_written_csv_from_any_heading(tmp_path, method, heading):
 def test_noisy_pyins_recording_at_10_hz_lands_on_the_limits_within_the_noise(method):
     # someone else's simulator, another sample rate (the ADRC runs at the 0.1 s sample interval and
     # its step-dependent defaults follow), a heading of 75 deg found without any initial guess
-    from fusionbench.imudata import IMUData
+    from fusionbench.simulation.imudata import IMUData
     from tests.conftest import load_fixture
 
     t, gyro, accel, meta = load_fixture("pyins_static_40n_noisy")

@@ -1,10 +1,10 @@
 """fusionbench identify: the Allan deviation of a static record, the IEEE-952 terms fitted to it, the spec and the report.
 
-Records are simulated with known terms: white noise, random walks and quantisation by :func:`fusionbench.imu.simulate`
-on a static base; bias instability as true flicker noise made here, independently of the library: the rate of a
-continuous process of two-sided PSD B^2 / (2 pi f) (IEEE 952, annex C) averaged over each sample, built by FFT from
-its exact discrete-time spectrum (the continuous one aliased through the averaging), and checked to have the
-Allan variance (2 ln2 / pi) B^2 of the definition.
+Records are simulated with known terms: white noise, random walks and quantisation by
+:func:`fusionbench.simulation.imu.simulate` on a static base; bias instability as true flicker noise made here,
+independently of the library: the rate of a continuous process of two-sided PSD B^2 / (2 pi f) (IEEE 952, annex C)
+averaged over each sample, built by FFT from its exact discrete-time spectrum (the continuous one aliased through the
+averaging), and checked to have the Allan variance (2 ln2 / pi) B^2 of the definition.
 
 Tolerances come from the record, not from trial: for each true term, the relative standard deviation of that term
 solved exactly from the best choice of as many octave taus as there are true terms, each Allan variance estimate
@@ -23,8 +23,8 @@ import pytest
 from scipy import integrate, optimize
 from scipy.stats import norm
 
-from fusionbench import allanfit, identify, imu, imudata, units
-from fusionbench import trajectory as tj
+from fusionbench.recording import allanfit, identify
+from fusionbench.simulation import imu, imudata, trajectory as tj, units
 
 DT = 0.1
 DEG = math.pi / 180
@@ -352,7 +352,7 @@ def small():
 
 
 def test_a_failing_figure_leaves_the_previous_output_as_it_was(small, tmp_path, monkeypatch):
-    import fusionbench.allanplot
+    import fusionbench.recording.allanplot
 
     out = tmp_path / "id"
     identify.run_identify(small, out, name="first")
@@ -363,7 +363,7 @@ def test_a_failing_figure_leaves_the_previous_output_as_it_was(small, tmp_path, 
         Path(path).write_bytes(b"half a figure")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(fusionbench.allanplot, "allan_figure", half_then_fail)
+    monkeypatch.setattr(fusionbench.recording.allanplot, "allan_figure", half_then_fail)
     with pytest.raises(OSError, match="No space left"):
         identify.run_identify(small, out, name="second")
     assert _snapshot(out) == before and [p.name for p in tmp_path.iterdir()] == ["id"]  # no hidden folder left

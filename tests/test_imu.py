@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from fusionbench import attitude, earth, trajectory as tj, units
-from fusionbench.imu import (IMUSpec, NoiseSchedule, PRESETS, SensorErrors, VelocityReferenceSpec, simulate,
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import (IMUSpec, NoiseSchedule, PRESETS, SensorErrors, VelocityReferenceSpec, simulate,
                              simulate_chunks, simulate_vref)
 
 D = np.pi / 180

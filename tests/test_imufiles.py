@@ -1,4 +1,4 @@
-"""Tests of fusionbench.imufiles: writer/reader round trips, the PSINS fixture, bad files, atomic writes."""
+"""Tests of fusionbench.files.imufiles: writer/reader round trips, the PSINS fixture, bad files, atomic writes."""
 
 import json
 import os
@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import fusionbench.imufiles as fio
-from fusionbench.attitude import dcm_to_euler
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import IMUFileError, read_imu, write_csv, write_npz, write_psins
-from fusionbench.units import ARCSEC, DEG
+import fusionbench.files.imufiles as fio
+from fusionbench.files.imufiles import IMUFileError, read_imu, write_csv, write_npz, write_psins
+from fusionbench.simulation.attitude import dcm_to_euler
+from fusionbench.simulation.imudata import IMUData
+from fusionbench.simulation.units import ARCSEC, DEG
 
 DATA = Path(__file__).parent / "data"
 HEADER = "t,gx,gy,gz,ax,ay,az"
@@ -201,8 +201,8 @@ def test_a_written_psins_file_integrates_to_the_truth_unlike_one_rounded_sample_
     """The writer carries each sample's rounding remainder into the next, so the strapdown of the written file
     ends where the strapdown of its exact increments does. pyins's copy of the same recording (written sample by
     sample without the carry) drifts by the summed rounding errors: 0.8 arcsec over these 2 minutes."""
-    from fusionbench import attitude
-    from fusionbench.strapdown import NavState, Strapdown
+    from fusionbench.simulation import attitude
+    from fusionbench.simulation.strapdown import NavState, Strapdown
 
     truth = json.loads((DATA / "pyins_sway_lat30s.json").read_text())
     rates, _ = read_imu(DATA / "pyins_sway_lat30s.csv")

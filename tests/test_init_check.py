@@ -1,5 +1,5 @@
 """A given initial attitude beyond what a linearised fine aligner recovers from is refused in one line naming
-``init`` (fusionbench.init_check); one within it is used and the method lands where it lands from the truth.
+``init`` (fusionbench.methods.init_check); one within it is used and the method lands where it lands from the truth.
 
 The offsets are known by construction: ``init`` is the truth at the record's start turned by a chosen angle, so the
 check's angle must find that angle (within the coarse solution's error), and a 180-deg turn must be refused by
@@ -10,13 +10,14 @@ import pytest
 
 from adrc.moving_base import ESOTDAligner
 from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner
-from fusionbench import attitude, earth, metrics, trajectory as tj, units
-from fusionbench.aligner import Site, load_method
-from fusionbench.imu import PRESETS, simulate
-from fusionbench.init_check import COARSE_NOISE_DEG, NOISE_SIGMAS, coarse_error_deg, init_offset_deg
+from fusionbench.methods.aligner import Site, load_method
+from fusionbench.methods.init_check import COARSE_NOISE_DEG, NOISE_SIGMAS, coarse_error_deg, init_offset_deg
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, simulate
 
-from fusionbench.aidingsim import AidingSpec, simulate_aiding  # noqa: I001 (after fusionbench.imu)
-from fusionbench.drive import car_drive
+from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding  # noqa: I001 (after simulation.imu)
+from fusionbench.simulation.drive import car_drive
 
 D = np.pi / 180
 LAT = 34 * D
@@ -98,7 +99,7 @@ def test_a_half_turn_is_refused_in_one_line_naming_init(static_data, method):
                                            (ESOTDAligner, 5.0)])
 def test_an_init_within_the_capture_range_is_used_and_recovered_from(method, angle):
     # over 300 s the method lands where it lands from the truth (the runs' noise is the same; only the start
-    # differs): within the attainable bound of this record in azimuth (2.1 arcmin, fusionbench.bound), and in
+    # differs): within the attainable bound of this record in azimuth (2.1 arcmin, fusionbench.scoring.bound), and in
     # level within the conformance matrix's level tolerance (0.5 arcmin); what is left of the start's transient
     tr = _static(300.0)
     data = simulate(tr, NAV, 0.01, runs=2, seed=5)

@@ -1,12 +1,12 @@
 """Jittered time stamps (issue 24): a known motion sampled at jittered times, written as a rate CSV (the rates at the
 actual times) and as a KF-GINS increment file (the exact increments over the actual intervals), read back onto a
-uniform grid (fusionbench.resample), through the strapdown and through ``align``.
+uniform grid (fusionbench.files.resample), through the strapdown and through ``align``.
 
 The motion is coning: pitch and roll of 2 deg at 1 Hz, a quarter period apart, so ``w x dw/dt`` is steady
 (``alpha^2 W^3``) and the componentwise resampling of the angle errs most. The attitude a jittered file gives at the
 last sample is compared with the one the same motion sampled uniformly over the same span gives (the resampling
-error, asserted within the bound ``c int |w x dw/dt| dt`` of fusionbench.resample), and for the increment file with
-the theory's own prediction ``sum_j c_j (dw/dt x w) dt``, ``c_j`` computed here from the times. A yaw-only sway at
+error, asserted within the bound ``c int |w x dw/dt| dt`` of fusionbench.files.resample), and for the increment file
+with the theory's own prediction ``sum_j c_j (dw/dt x w) dt``, ``c_j`` computed here from the times. A yaw-only sway at
 the same jitter shows the mechanism: its axis is fixed, so its error is the earth rate's share only. The bad files
 (a gap, a duplicate time, a reversal, too short a step) end in one line naming the file and the row, exit status 2.
 """
@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fusionbench import attitude, trajectory as tj, units
 from fusionbench.cli import main
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import read_imu
-from fusionbench.layouts import read_layout
-from fusionbench.strapdown import NavState, Strapdown
+from fusionbench.files.imufiles import read_imu
+from fusionbench.files.layouts import read_layout
+from fusionbench.simulation import attitude, trajectory as tj, units
+from fusionbench.simulation.imudata import IMUData
+from fusionbench.simulation.strapdown import NavState, Strapdown
 
 D = np.pi / 180
 ARCSEC = units.ARCSEC

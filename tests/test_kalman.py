@@ -9,10 +9,11 @@ import pytest
 
 from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner
 from baselines.kalman_filter import discretize, error_model
-from fusionbench import attitude, earth, metrics, trajectory as tj, units
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
-from fusionbench.imufiles import write_csv
+from fusionbench.files.imufiles import write_csv
+from fusionbench.methods.aligner import Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, IMUSpec, SensorErrors, VelocityReferenceSpec, simulate, simulate_vref
 from tests.conftest import agree_to_rounding
 
 D = np.pi / 180
@@ -44,7 +45,7 @@ def test_error_model_has_the_textbook_blocks():
 def test_akf_takes_the_scenarios_reference_noise():
     # changed: akf's options were **kw, so a scenario's reference noise never reached it (0.05 m/s whatever the
     # reference: on the 0.1 m/s moving base its Q inflation then took it 3.7 bounds off)
-    from fusionbench.aligner import load_method
+    from fusionbench.methods.aligner import load_method
 
     assert load_method("akf", vref_sigma=0.1).vref_sigma == 0.1
     assert load_method("akf", imu="tactical").spec.name == "tactical"
@@ -139,7 +140,7 @@ def test_batched_filters_give_filterpys_estimates(method):
 
 
 def tj_schedule():
-    from fusionbench.imu import NoiseSchedule
+    from fusionbench.simulation.imu import NoiseSchedule
 
     return NoiseSchedule(60.0, 100.0, 100.0)
 
@@ -148,9 +149,9 @@ def test_fixed_base_fine_stage_has_the_whole_record_at_the_hand_over():
     # changed: on a fixed base the fine stage started at the hand-over (60 s) from the coarse attitude, so its first
     # reported attitude carried the coarse stage's level (27 arcmin RMS here) and a prior-sized sigma (300 arcmin in
     # azimuth); now it re-runs the record from its start (the coarse attitude carried back there), so at the
-    # hand-over it holds what 60 s of data give an optimal estimator (fusionbench.bound.attainable_bound: 0.105 /
-    # 0.105 / 14.30 arcmin; the filter's sigma 0.104 / 0.104 / 14.31)
-    from fusionbench import bound
+    # hand-over it holds what 60 s of data give an optimal estimator (fusionbench.scoring.bound.attainable_bound:
+    # 0.105 / 0.105 / 14.30 arcmin; the filter's sigma 0.104 / 0.104 / 14.31)
+    from fusionbench.scoring import bound
 
     base = PRESETS["seed000"]
     spec = IMUSpec(gyro=SensorErrors(bias_sigma=base.gyro.bias, white=base.gyro.white),
@@ -176,10 +177,10 @@ def test_fixed_base_biases_keep_the_tactical_level_on_its_limit():
     # accelerometer biases are unobservable against the tilts; the unobservable directions then turned with the
     # estimated attitude (its corrections, the gyro noise's wander) and the filter took spurious information from
     # that: with a tactical IMU (1 deg/h, 0.1 deg/sqrt(h), 300 ug) its north level ended 1.8 arcmin RMS beside the
-    # limit (mean 1.7), against the optimal estimator's 0.08 (fusionbench.bound.attainable_bound); navigation-frame
-    # states: 0.08 / 0.11. The gyro biases stay body-frame: a north gyro bias alone (noise-free, from the true
-    # attitude) then leaves the azimuth where it was (navigation-frame gyro states took it 71 arcmin off)
-    from fusionbench import bound
+    # limit (mean 1.7), against the optimal estimator's 0.08 (fusionbench.scoring.bound.attainable_bound);
+    # navigation-frame states: 0.08 / 0.11. The gyro biases stay body-frame: a north gyro bias alone (noise-free, from
+    # the true attitude) then leaves the azimuth where it was (navigation-frame gyro states took it 71 arcmin off)
+    from fusionbench.scoring import bound
 
     lat = 0.0
     spec = IMUSpec(gyro=SensorErrors(bias=(units.DEG_PER_H,) * 3, white=(0.1 * units.DEG_PER_SQRT_H,) * 3),
@@ -200,7 +201,7 @@ def test_on_a_fixed_base_the_filter_takes_no_azimuth_information_from_its_own_ti
     # the estimate's tilt error; that coupled the azimuth into the velocity rows where the true errors have nothing,
     # and with an exact reference the filter believed it: a tactical IMU at the equator ended 1.66-1.69 attainable
     # bounds from the limit while its own sigma said 1.1 (here: 1.78); at gravity's reaction 1.11, inside its sigma
-    from fusionbench import bound
+    from fusionbench.scoring import bound
 
     lat, runs = 0.0, 32
     spec = PRESETS["tactical"]

@@ -15,11 +15,11 @@ import pytest
 
 from baselines.kalman import AdaptiveKalmanAligner, KalmanAligner
 from baselines.kalman_aiding import Rows, attitude_at_start, initial_motion, step_measurement
-from fusionbench import attitude, imu, units  # noqa: F401  (imu before aidingsim: imusim imports it)
-from fusionbench.aidingsim import AidingSpec, simulate_aiding
-from fusionbench.aligner import Site
-from fusionbench.drive import car_drive
-from fusionbench.imu import PRESETS, simulate
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation import attitude, imu, units  # noqa: F401  (imu before aidingsim: imusim imports it)
+from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
+from fusionbench.simulation.drive import car_drive
+from fusionbench.simulation.imu import PRESETS, simulate
 from tests.conftest import agree_to_rounding
 
 D = np.pi / 180
@@ -33,7 +33,8 @@ SPEC = PRESETS["navigation"]
 
 @pytest.fixture(scope="module")
 def car():
-    """A car's 300-s drive with 40-deg turns at 5 deg/s (fusionbench.drive.car_drive), 50 Hz, RUNS recordings."""
+    """A car's 300-s drive with 40-deg turns at 5 deg/s (fusionbench.simulation.drive.car_drive), 50 Hz, RUNS
+    recordings."""
     tr = car_drive(LAT, 1.9, 100.0, heading=30 * D, duration=300.0)
     data = simulate(tr, SPEC, DT, runs=RUNS, seed=5)
     C_true0 = tr.truth([data.t0]).C_bn[0]

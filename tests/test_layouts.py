@@ -1,9 +1,9 @@
-"""Tests of fusionbench.layouts: other people's IMU log layouts read into fusionbench's frames and units.
+"""Tests of fusionbench.files.layouts: other people's IMU log layouts read into fusionbench's frames and units.
 
 One swaying recording (fusionbench's simulator, perfect IMU) is written in each layout by this file's own writer,
 which takes the file axes from their letter definitions (never from the module's matrices) and the units from
-fusionbench.units. Read back, the arrays must equal the original to float precision, and the strapdown of them
-from the true initial state must reach the true attitude and velocity at the last sample within bounds that a
+fusionbench.simulation.units. Read back, the arrays must equal the original to float precision, and the strapdown of
+them from the true initial state must reach the true attitude and velocity at the last sample within bounds that a
 read one sample late, or with a wrong axis, exceeds a hundred times over (both reads are made and shown to fail).
 Real pyins files, written by pyins itself, go through the pyins layouts: a sway through the strapdown, a static
 record through the analytic coarse alignment.
@@ -18,17 +18,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fusionbench import attitude, trajectory as tj
-from fusionbench.aligner import Site
-from fusionbench.coarse import CoarseAligner
-from fusionbench.fields import FieldError
-from fusionbench.imu import IMUSpec, simulate
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import IMUFileError, read_csv, write_csv
-from fusionbench.layouts import (AXES, BUILTIN_LAYOUTS, Layout, layout_from_name_or_file, load_layout,
+from fusionbench.files.imufiles import IMUFileError, read_csv, write_csv
+from fusionbench.files.layouts import (AXES, BUILTIN_LAYOUTS, Layout, layout_from_name_or_file, load_layout,
                                  read_layout)
-from fusionbench.strapdown import NavState, Strapdown
-from fusionbench.units import ARCSEC, DEG, DEG_PER_H, DEG_PER_S, G0, MICROSECOND, MILLISECOND, NANOSECOND
+from fusionbench.methods.aligner import Site
+from fusionbench.methods.coarse import CoarseAligner
+from fusionbench.simulation import attitude, trajectory as tj
+from fusionbench.simulation.fields import FieldError
+from fusionbench.simulation.imu import IMUSpec, simulate
+from fusionbench.simulation.imudata import IMUData
+from fusionbench.simulation.strapdown import NavState, Strapdown
+from fusionbench.simulation.units import ARCSEC, DEG, DEG_PER_H, DEG_PER_S, G0, MICROSECOND, MILLISECOND, NANOSECOND
 from tests.independent import P as P_PYINS
 
 LAT, LON, H = 34 * DEG, 108 * DEG, 450.0
@@ -585,7 +585,7 @@ def _table_rows(first_header):
 
 
 def test_doc_documents_every_key_axes_and_builtin(tmp_path):
-    from fusionbench.layouts import LAYOUT_KEYS
+    from fusionbench.files.layouts import LAYOUT_KEYS
 
     assert sorted(_table_rows("key")) == sorted(LAYOUT_KEYS)
     assert sorted(_table_rows("name")) == sorted(BUILTIN_LAYOUTS)

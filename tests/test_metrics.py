@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from fusionbench import attitude, earth, metrics, units
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, units
 
 D = np.pi / 180
 

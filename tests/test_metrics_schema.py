@@ -11,7 +11,7 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from fusionbench.check import packaged_reference
+from fusionbench.bench.check import packaged_reference
 
 SCHEMA = json.loads((Path(__file__).parents[1] / "docs" / "metrics.schema.json").read_text())
 VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)

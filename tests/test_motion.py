@@ -1,12 +1,13 @@
-"""The motion check every aligner applies without aiding (fusionbench.motion): fixed bases pass with margin, a base
-that moves anywhere in the record is refused in one line naming --aiding."""
+"""The motion check every aligner applies without aiding (fusionbench.methods.motion): fixed bases pass with margin, a
+base that moves anywhere in the record is refused in one line naming --aiding."""
 
 import numpy as np
 import pytest
 
-from fusionbench import drive, imu, motion, trajectory
-from fusionbench.aligner import Site, load_method
-from fusionbench.translation import Translation, VelocityDisturbance
+from fusionbench.methods import motion
+from fusionbench.methods.aligner import Site, load_method
+from fusionbench.simulation import drive, imu, trajectory
+from fusionbench.simulation.translation import Translation, VelocityDisturbance
 
 D = np.pi / 180
 LAT = 34 * D

@@ -19,9 +19,10 @@ from adrc.ls_differentiator import LeastSquaresDifferentiator
 from adrc import moving_base
 from adrc.moving_base import PAPER_PARAMETERS, ESOTDAligner
 from adrc.primitives import FSTTrackingDifferentiator, SecondOrderESO, fst
-from fusionbench import attitude, earth, metrics, trajectory as tj, units
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
+from fusionbench.methods.aligner import Site
+from fusionbench.scoring import metrics
+from fusionbench.simulation import attitude, earth, trajectory as tj, units
+from fusionbench.simulation.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
 from tests.conftest import engines_agree
 from tests.oracles.eso_td import run_numpy
 
@@ -286,7 +287,7 @@ def test_fst_td_crosses_a_large_step_with_bounded_acceleration_and_no_overshoot(
 @pytest.mark.parametrize("lat_deg", [34.0, -45.0])
 def test_static_base_with_any_body_attitude_lands_on_the_shared_static_limits(lat_deg, config):
     # no reference given (zero velocity), rate samples, a tilted body at heading 70 deg: s = n = 0,
-    # W = w_ie, and the limits are fusionbench.metrics' (measured within 0.004' printed). The default's
+    # W = w_ie, and the limits are fusionbench.scoring.metrics' (measured within 0.004' printed). The default's
     # fit reads the mean azimuth over its 265 s, which drifts with -epsU (0.017 deg/h up here, 0.07' over
     # the fit): measured 0.012' and 0.039' off
     lat = lat_deg * D
@@ -388,7 +389,7 @@ def test_a_perfect_imu_on_seed_000s_sway_lands_on_the_truth_where_the_printed_td
 
 # ------------------------------------------------------------------- a moving base without a reference: refused
 def test_a_moving_base_without_a_reference_is_refused_naming_the_method_and_the_figure():
-    # without aiding every aligner checks the record for a base that moves (fusionbench.motion, the base class's
+    # without aiding every aligner checks the record for a base that moves (fusionbench.methods.motion, the base class's
     # check: eso-td has none of its own). Seed 001's base (0.1 g east) run as if static: a constant acceleration
     # is a tilt of a / g to first order, which no fit of the record tells, but it raises the specific force over
     # gravity by a^2 / 2 g^2 = 4.9 mg, less the Eotvos effect of the eastward speed (up to 118 m/s): 4.5 mg
@@ -402,7 +403,7 @@ def test_a_moving_base_without_a_reference_is_refused_naming_the_method_and_the_
             ESOTDAligner().align(data, SITE, init=init)
     # a velocity change during the record (0.01 g from 30 s) shows in the fit's residual, which no rotation of
     # gravity explains: measured 0.55 m/s over the first 60 s against the 0.17 m/s a stationary or swaying base stays
-    # within there (fusionbench.motion)
+    # within there (fusionbench.methods.motion)
     tr = tj.accelerating(LAT, accel=0.01 * 9.80665, start=30.0, duration=120.0)
     with pytest.raises(ValueError, match=r"^eso-td: the base moves .*departs from gravity's by .* m/s of "
                                          r"horizontal velocity") as refused:

@@ -8,11 +8,10 @@ import numpy as np
 import pytest
 
 from baselines.kalman import KalmanAligner
-from fusionbench import fields, units
-from fusionbench.aligner import load_method, uses_noise_model, variant
-from fusionbench.aligner import Site
-from fusionbench.imu import PRESETS, load_spec
-from fusionbench.imudata import IMUData
+from fusionbench.methods.aligner import Site, load_method, uses_noise_model, variant
+from fusionbench.simulation import fields, units
+from fusionbench.simulation.imu import PRESETS, load_spec
+from fusionbench.simulation.imudata import IMUData
 
 SPEC_TOML = """
 [imu]
@@ -75,7 +74,7 @@ def test_filter_takes_its_noise_model_from_the_spec_and_states_it():
     # load_method gives the model only to methods that use one; options win
     assert load_method("kf", imu="mems").spec.name == "mems"
     # in a scenario the filter gets the scenario's IMU (the true model) unless its variant names one
-    from fusionbench import scenarios
+    from fusionbench.bench import scenarios
     scn = scenarios.get("static-q-jump")
     assert scn.method("kf").spec == scn.imu_spec
     import dataclasses

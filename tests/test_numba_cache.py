@@ -8,12 +8,11 @@ from pathlib import Path
 
 import fusionbench
 
-PACKAGES = [Path(fusionbench.__file__).parent] + [Path(fusionbench.__file__).parent.parent / p
-                                                   for p in ("baselines", "adrc", "damping")]
+PACKAGES = [Path(fusionbench.__file__).parent.parent / p for p in fusionbench.compiled_packages()]
 SCRIPT = """
 import numpy as np
-from fusionbench import trajectory, imu
-from fusionbench.aligner import Site
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation import trajectory, imu
 from baselines.gyrocompass import PIDGyrocompass
 tr = trajectory.Trajectory(0.6, 1.9, 0.0, trajectory.EulerSway(mean=np.zeros(3)), duration=90.0)
 data = imu.simulate(tr, imu.PRESETS["navigation"], 0.1, runs=1, seed=0)
@@ -45,12 +44,17 @@ def test_an_explicit_numba_cache_dir_wins(tmp_path):
     assert out.stdout.split() == [str(tmp_path / "mine")] * 2
 
 
+def test_the_compiled_packages_are_the_core_and_every_registered_plug_in():
+    """The core names no family: the packages whose kernels share a cache key come from the entry points."""
+    assert fusionbench.compiled_packages() == ("fusionbench", "adrc", "baselines", "damping")
+
+
 def test_a_change_to_any_compiled_source_starts_a_fresh_cache(tmp_path):
     """numba checks only a kernel's own file: a kernel calling the strapdown kernel from another file would keep its
     stale cache after an edit of strapdown.py. The cache folder is named by a digest of every compiled source, so an
     edit of any of them (and only of them) moves it."""
     for pkg, name, text in (("fusionbench", "strapdown.py", "import numba\nA = 1\n"),
-                            ("adrc", "loop.py", "import numba\nfrom fusionbench.strapdown import A\n"),
+                            ("adrc", "loop.py", "import numba\nfrom fusionbench.simulation.strapdown import A\n"),
                             ("fusionbench", "report.py", "B = 1\n")):
         (tmp_path / pkg).mkdir(exist_ok=True)
         (tmp_path / pkg / name).write_text(text)

@@ -15,11 +15,11 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 import pytest
 
-from fusionbench import provenance, scenarios
-from fusionbench.overview import GOOD_FACTOR, _flag_diverged, grade, headline, write_overview
-from fusionbench.pages import write_page
-from fusionbench.experiment import write_scenario_report
-from fusionbench.experiment import run_scenario
+from fusionbench.bench import scenarios
+from fusionbench.bench.experiment import run_scenario, write_scenario_report
+from fusionbench.experiments.overview import GOOD_FACTOR, _flag_diverged, grade, headline, write_overview
+from fusionbench.files import provenance
+from fusionbench.files.pages import write_page
 
 TINY = Path(__file__).parent / "data" / "tiny-jump.toml"  # static, reference noise x100 from 40 to 60 s
 

@@ -11,11 +11,12 @@ from importlib.metadata import EntryPoint
 import numpy as np
 import pytest
 
-from fusionbench import earth, experiment, features, scenarios, units
-from fusionbench.alignment import AlignmentExperiment
-from fusionbench.check import compare
-from fusionbench.experiment import run_scenario, write_scenario_report
-from fusionbench.features import FeatureBase
+from fusionbench.bench import experiment, feature as features, scenarios
+from fusionbench.bench.check import compare
+from fusionbench.bench.experiment import run_scenario, write_scenario_report
+from fusionbench.bench.feature import FeatureBase
+from fusionbench.experiments.alignment import AlignmentExperiment
+from fusionbench.simulation import earth, units
 
 TOML = """
 name = "tiny-plugin"
@@ -82,7 +83,7 @@ class Repeated(AlignmentExperiment):
     def run(self, scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, refusals=False):
         from dataclasses import replace
 
-        from fusionbench.aligner import Site
+        from fusionbench.methods.aligner import Site
 
         outs = {lat: super(Repeated, self).run(replace(scn, site=Site.from_degrees(lat), experiment="alignment"),
                                                methods, runs, seed, quick, n_jobs, False)
@@ -171,7 +172,7 @@ def test_an_unregistered_experiment_is_one_line_naming_the_registered_ones(tmp_p
 def test_every_scenario_type_has_the_common_attributes_and_resolves_its_experiment_once():
     """A scenario (Scenario) and a matrix (Matrix) answer the attributes the core reads on any scenario, and the
     experiment named in the file is loaded once per scenario (the same object on every use)."""
-    from fusionbench.conformance import ConformanceExperiment
+    from fusionbench.experiments.conformance import ConformanceExperiment
 
     for name, exp_type, conditions in (("static-r-jump", AlignmentExperiment, 0),
                                        ("conformance", ConformanceExperiment, 28)):

@@ -7,7 +7,7 @@ import sys
 
 CHILD = """
 import os
-from fusionbench.progress import terminal_bar
+from fusionbench.files.progress import terminal_bar
 print(tuple(os.get_terminal_size(2)), flush=True)
 bar = terminal_bar(3, "runs", disable=False)
 bar.update(3)

@@ -7,9 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from fusionbench import bound, scenarios, units
-from fusionbench.experiment import run_scenario, write_scenario_report
-from fusionbench.report import _table, azimuth_figure
+from fusionbench.bench import scenarios
+from fusionbench.bench.experiment import run_scenario, write_scenario_report
+from fusionbench.reports.report import _table, azimuth_figure
+from fusionbench.scoring import bound
+from fusionbench.simulation import units
 
 TOML = """
 name = "tiny-report"

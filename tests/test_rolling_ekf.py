@@ -106,7 +106,7 @@ def test_noise_free_paper_run_recovers_every_coefficient_within_one_percent():
     angle) and the attitude within 0.1 arcsec (0.03 measured). The causal first pass alone does not:
     its torquer and gyro axis-angle errors are tens of ppm and arcseconds (R inflated while the attitude
     is degrees off), which is why the second pass exists."""
-    from fusionbench import scenarios
+    from fusionbench.bench import scenarios
     from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
@@ -195,7 +195,7 @@ def test_second_pass_reaches_the_information_bound():
     are the inverse of prior + information: equal to ``bound()`` (1.0000 measured). That bound in turn
     agrees with the scheme's PWCS information matrix computed independently along the commanded path
     (baselines.rolling.observability, expm per step) to 3.4 % (the paths differ by the truths' drift)."""
-    from fusionbench import scenarios
+    from fusionbench.bench import scenarios
     from baselines.rolling.spec import draw_truth
     from baselines.rolling.observability import information_matrix
 
@@ -219,7 +219,7 @@ def test_auto_passes_iterate_until_the_linearisation_point_is_the_answer():
     """A 10-deg initial azimuth error (the filter starts at 0): two passes end far outside their sigmas
     (1682 measured on this draw), because the first pass ends outside the linear range; passes="auto"
     keeps relinearising (5 passes here) and lands within 4 sigmas (2.2 measured)."""
-    from fusionbench import scenarios
+    from fusionbench.bench import scenarios
     from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")
@@ -241,7 +241,7 @@ def test_numpy_engine_matches_filterpy():
     noisy run of the paper's scheme cut to 1/12 (150, 75, 150, 75 s: 2 250 filter steps), started levelled
     with the azimuth off: both passes' estimate and sigma histories and the final estimate agree to rounding
     (identical bits measured: the same operations in the same order)."""
-    from fusionbench import scenarios
+    from fusionbench.bench import scenarios
     from baselines.rolling.spec import draw_truth
 
     scn = scenarios.get("paper002-rolling")

@@ -8,10 +8,9 @@ import pytest
 from baselines.rolling import model
 from baselines.rolling.experiment import RollingScenario
 from baselines.rolling.spec import PlatformSpec, draw_truth
-from fusionbench import scenarios
-from fusionbench.check import compare
-from fusionbench.experiment import write_scenario_report
-from fusionbench.experiment import run_scenario
+from fusionbench.bench import scenarios
+from fusionbench.bench.check import compare
+from fusionbench.bench.experiment import run_scenario, write_scenario_report
 
 TOML = """
 name = "tiny-rolling"
@@ -78,7 +77,7 @@ def test_run_metrics_follow_the_contract_and_do_not_depend_on_workers(tmp_path):
     assert 0 < r["information_rank"] <= 45 and m["information_rank"] == r["information_rank"]
     # two passes: the settling time is the causal first pass's; its own end errors are reported beside
     oc = a.outcomes["rolling-ekf"]
-    from fusionbench import units
+    from fusionbench.simulation import units
     assert oc["has_first_pass"] and r["passes"] == 2 and oc["settle"].shape == (2,) and oc["phi_end_causal"].shape == (2, 3)
     assert r["settling_time_s"]["U"]["mean"] == pytest.approx(np.mean(oc["settle"]))
     assert r["first_pass"]["final_error_arcmin"]["U"]["rms"] == pytest.approx(

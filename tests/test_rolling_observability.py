@@ -11,7 +11,7 @@ from baselines.rolling.jacobians import error_jacobians
 from baselines.rolling.priors import prior_sigma
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, commanded_path, commands
 from baselines.rolling.simulator import simulate
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 LAT = np.radians(40.0)
 RATE = np.radians(0.1)

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 from baselines.rolling import angles, model
 from baselines.rolling.scheme import PAPER_SCHEME, Scheme, commanded_path, commands
 from baselines.rolling.simulator import simulate
-from fusionbench import earth, units
+from fusionbench.simulation import earth, units
 
 D = np.pi / 180
 LAT = 34 * D

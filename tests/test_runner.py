@@ -5,10 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from fusionbench import scenarios
-from fusionbench.check import compare
-from fusionbench.experiment import write_scenario_report
-from fusionbench.experiment import run_scenario
+from fusionbench.bench import scenarios
+from fusionbench.bench.check import compare
+from fusionbench.bench.experiment import run_scenario, write_scenario_report
 
 TOML = """
 name = "tiny"
@@ -139,7 +138,7 @@ def test_check_flags_only_regressions():
 
 
 def test_imu_overrides_are_converted_from_customary_units(tmp_path):
-    from fusionbench import units
+    from fusionbench.simulation import units
     p = tmp_path / "o.toml"
     p.write_text(TOML.replace('preset = "tactical"', 'preset = "tactical"\ngyro_bias_dph = [0.02, 0, 0]\n'
                               'vrw_ug_rthz = 7.0\nrandom = false'))
@@ -177,7 +176,7 @@ class Wobble:
     def align(self, imu, site, vref=None, init=None):
         from scipy.spatial.transform import Rotation
 
-        from fusionbench.aligner import AlignmentResult
+        from fusionbench.methods.aligner import AlignmentResult
         t = imu.t
         phi = np.stack([self.a * np.sin(2 * np.pi * t / self.p), np.full(t.size, self.c), np.zeros(t.size)], -1)
         C = Rotation.from_rotvec(-phi).as_matrix() @ np.asarray(init)
@@ -238,8 +237,8 @@ class WholeRecordCoarse:
     min_duration_s = 1.0
 
     def align(self, imu, site, vref=None, init=None):
-        from fusionbench.coarse import CoarseAligner
-        from fusionbench.aligner import AlignmentResult
+        from fusionbench.methods.aligner import AlignmentResult
+        from fusionbench.methods.coarse import CoarseAligner
 
         res = CoarseAligner(history_points=60).align(imu, site)
         return AlignmentResult(self.name, res.t, np.repeat(res.C_bn[:, -1:], res.t.size, axis=1), causal=False)
@@ -249,10 +248,11 @@ def test_settling_is_measured_against_the_limit_and_on_prefixes_for_a_smoother(t
     # the whole-record stand-in reports, on each prefix of the record, what the causal coarse alignment
     # reports at the prefix's end; its own history (constant at its final value) would claim it settled at
     # once. Measured on prefixes every 25 s, its settling is the causal method's settling read at those times.
-    from fusionbench.coarse import CoarseAligner
-    from fusionbench import metrics, units
-    from fusionbench.imu import simulate
-    from fusionbench.imudata import IMUData
+    from fusionbench.methods.coarse import CoarseAligner
+    from fusionbench.scoring import metrics
+    from fusionbench.simulation import units
+    from fusionbench.simulation.imu import simulate
+    from fusionbench.simulation.imudata import IMUData
 
     p = tmp_path / "settle.toml"
     p.write_text('name = "settle"\nduration_s = 200.0\nrate_hz = 20.0\nruns = 4\nmethods = ["coarse"]\n'
@@ -281,7 +281,7 @@ def test_smoother_settling_on_the_first_runs_whatever_the_batching(tmp_path):
     """A smoother's prefix settling is measured on the seed's first PREFIX_RUNS runs only (each costs about five
     whole-record alignments): the same runs, the same figures, for any batch size; the others are NaN and the
     statistics are over the measured ones."""
-    from fusionbench.runner import PREFIX_RUNS
+    from fusionbench.bench.runner import PREFIX_RUNS
 
     p = tmp_path / "settle.toml"
     p.write_text('name = "settle"\nduration_s = 100.0\nrate_hz = 20.0\nruns = 7\nmethods = ["coarse"]\n'
@@ -312,7 +312,7 @@ class _Counter:
 def test_a_shared_bar_advances_by_finished_runs(n_jobs):
     """``run all`` shares one bar: each scenario advances it by exactly its runs, as each method finishes a batch
     (also under workers: a worker's unit is one method on one batch), and leaves it open for the next scenario."""
-    from fusionbench import progress
+    from fusionbench.files import progress
 
     scn = scenarios.get("static-34n")
     bar = _Counter()
@@ -327,7 +327,7 @@ def test_a_shared_bar_advances_by_finished_runs(n_jobs):
 
 
 USER_METHODS = '''
-from fusionbench.coarse import CoarseAligner
+from fusionbench.methods.coarse import CoarseAligner
 
 
 class Mine(CoarseAligner):

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from fusionbench import attitude, earth, strapdown, trajectory as tj, units
-from fusionbench.imufiles import read_psins
-from fusionbench.strapdown import NavState, Strapdown
-from fusionbench.translation import Segment, Translation
+from fusionbench.files.imufiles import read_psins
+from fusionbench.simulation import attitude, earth, strapdown, trajectory as tj, units
+from fusionbench.simulation.strapdown import NavState, Strapdown
+from fusionbench.simulation.translation import Segment, Translation
 from tests.conftest import DATA, agree_to_rounding, load_fixture
 from tests.oracles.strapdown import integrate_numpy
 

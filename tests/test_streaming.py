@@ -1,11 +1,12 @@
-"""Long records streamed to the methods that take chunks (fusionbench.streaming): the same numbers as the whole
+"""Long records streamed to the methods that take chunks (fusionbench.bench.streaming): the same numbers as the whole
 record, bit for bit, and memory bounded by a batch, not by the number of runs."""
 
 import numpy as np
 import pytest
 
-from fusionbench import imu, runner, scenarios, streaming
-from fusionbench.trajectory import moored
+from fusionbench.bench import runner, scenarios, streaming
+from fusionbench.simulation import imu
+from fusionbench.simulation.trajectory import moored
 
 # seed 004's navigation scenario cut to 25 min: the network switched in at 400 s, an east manoeuvre at 900 s, the
 # adaptive scheme reading the (noisy) reference's acceleration, so the chunks carry a reference too

@@ -16,11 +16,11 @@ import sys
 import numpy as np
 import pytest
 
-from fusionbench import attitude, units
-from fusionbench.aligner import AlignmentResult, Site, available_methods, check_time_rule, load_method
-from fusionbench.claims import supports
-from fusionbench.imudata import IMUData
-from fusionbench.imufiles import read_imu, write_csv, write_npz, write_psins
+from fusionbench.files.imufiles import read_imu, write_csv, write_npz, write_psins
+from fusionbench.methods.aligner import AlignmentResult, Site, available_methods, check_time_rule, load_method
+from fusionbench.methods.claims import supports
+from fusionbench.simulation import attitude, units
+from fusionbench.simulation.imudata import IMUData
 from tests import independent
 
 METHODS = sorted(available_methods())

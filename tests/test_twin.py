@@ -8,7 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from fusionbench import claims, imu, scenarios, units
+from fusionbench.bench import scenarios
+from fusionbench.methods import claims
+from fusionbench.simulation import imu, units
 
 
 def cli(*args, cwd=None):
@@ -45,7 +47,8 @@ def test_run_all_leaves_the_template_out(monkeypatch):
 
     seen = []
     monkeypatch.setattr(fcli.reportdir, "prepare", lambda folders: seen.extend(folders) or [])
-    monkeypatch.setattr("fusionbench.experiment.run_scenario", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+    monkeypatch.setattr("fusionbench.bench.experiment.run_scenario",
+                        lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
     assert fcli.main(["run", "all", "--quick", "--out", "/nonexistent-fusionbench-test"]) == fcli.EXIT_INTERRUPTED
     names = {p.name for p in seen}
     assert "twin" not in names and "conformance" in names and len(names) == len(scenarios.builtin_names()) - 1

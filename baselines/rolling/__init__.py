@@ -31,7 +31,7 @@ Modules (each imports only modules above it in this list, and :mod:`fusionbench`
 - ``spec``: the scenario file's ``[platform]`` table and the per-run draw of the truth.
 - ``montecarlo``: the Monte Carlo of a platform-rolling scenario and its metrics.json figures.
 - ``report``: report.md and the figures of a run.
-- ``experiment``: the ``platform-rolling`` experiment (:class:`fusionbench.experiment.Experiment`).
+- ``experiment``: the ``platform-rolling`` experiment (:class:`fusionbench.bench.experiment.Experiment`).
 
 Frames
 ------
@@ -97,11 +97,11 @@ index    coefficients                             SI unit            reported in
 =======  =======================================  =================  ===========
 
 ``COEFF_SCALE`` holds the SI value of one reporting unit (g is the unit 9.80665 m/s^2 of
-:mod:`fusionbench.units`): ``coeffs_SI = values_customary * COEFF_SCALE``.
+:mod:`fusionbench.simulation.units`): ``coeffs_SI = values_customary * COEFF_SCALE``.
 
 Model equations
 ---------------
-Specific force in p (static base, g = :func:`fusionbench.earth.gravity` (lat, h))::
+Specific force in p (static base, g = :func:`fusionbench.simulation.earth.gravity` (lat, h))::
 
     f^n = [0, 0, g],   f^p = C_pn^T f^n
 

@@ -79,7 +79,7 @@ import scipy.linalg
 from filterpy.kalman import ExtendedKalmanFilter
 from threadpoolctl import threadpool_limits
 
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 from . import kernels as K
 from . import model

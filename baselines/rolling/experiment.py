@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from fusionbench import scenarios
-from fusionbench.check import REL_TOL
+from fusionbench.bench import scenarios
+from fusionbench.bench.check import REL_TOL
 
 from .montecarlo import run_calibration
 from .protocol import CALIBRATORS_GROUP, load_calibrator
@@ -28,7 +28,7 @@ def _platform_table(d, src, duration):
 
 @dataclasses.dataclass(frozen=True)
 class RollingScenario(scenarios.Scenario):
-    """A platform-rolling scenario: a :class:`fusionbench.scenarios.Scenario` (site, IMU, runs, durations) and its
+    """A platform-rolling scenario: a :class:`fusionbench.bench.scenarios.Scenario` (site, IMU, runs, durations) and its
     ``[platform]`` table, the rolling scheme and the error coefficients drawn per run (:class:`PlatformSpec`, SI)."""
 
     platform: PlatformSpec | None = None
@@ -36,7 +36,8 @@ class RollingScenario(scenarios.Scenario):
 
 class PlatformRolling:
     """Seed 002's platform self-calibration (``experiment = "platform-rolling"``) as an
-    :class:`fusionbench.experiment.Experiment`: a ``[platform]`` table, methods from ``fusionbench.calibrators``."""
+    :class:`fusionbench.bench.experiment.Experiment`: a ``[platform]`` table, methods from
+    ``fusionbench.calibrators``."""
 
     name = "platform-rolling"
     kind = "calibration"
@@ -67,9 +68,9 @@ class PlatformRolling:
         return scheme_events(scn.platform.scaled(duration_s).scheme)
 
     def headline(self, metrics):
-        """The overview's column (:class:`fusionbench.overview.Column`): the coefficient groups within the paper's
-        claim and the worst abs(mean error) over its claim (good within 1)."""
-        from fusionbench.overview import Column
+        """The overview's column (:class:`fusionbench.experiments.overview.Column`): the coefficient groups within the
+        paper's claim and the worst abs(mean error) over its claim (good within 1)."""
+        from fusionbench.experiments.overview import Column
 
         col = Column(metrics["scenario"], "calibration", "coefficient groups within the paper's claim; worst |mean "
                      "error| / claim", short="within claim; worst / claim", claim=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import units
+from fusionbench.simulation import units
 
 from .observability import ERROR_STATE_NAMES
 
@@ -36,10 +36,10 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
     names : list of str, optional
         State names, default :data:`ERROR_STATE_NAMES`.
     path : str or path-like
-        PNG file written (atomically, :func:`fusionbench.figures.save_png`).
+        PNG file written (atomically, :func:`fusionbench.reports.figures.save_png`).
     groups : sequence of (title, list of names), optional
         Panels; default :data:`FIGURE_GROUPS`.
-    events : sequence of fusionbench.figure_events.Event, optional
+    events : sequence of fusionbench.reports.figure_events.Event, optional
         Marked on the time axis (e.g. :func:`baselines.rolling.scheme.scheme_events`, the roll phases).
 
     Returns
@@ -47,8 +47,8 @@ def sensitivity_figure(times, S, names=None, path="sensitivity.png", groups=FIGU
     str
         The path written.
     """
-    from fusionbench import figures as fg  # matplotlib only when a figure is drawn
-    from fusionbench.figure_events import events_note, in_record, mark_events
+    from fusionbench.reports import figures as fg  # matplotlib only when a figure is drawn
+    from fusionbench.reports.figure_events import events_note, in_record, mark_events
 
     t = np.asarray(times, dtype=float)
     S = np.asarray(S, dtype=float)

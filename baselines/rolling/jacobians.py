@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 from . import kernels as K
 from . import angles, model

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth, units
+from fusionbench.simulation import earth, units
 
 from .angles import _angle_rates, _angles_dcm, _check_vec
 from .terms import accel_terms, drift_terms

@@ -29,8 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 from joblib import Parallel, delayed
 
-from fusionbench import metrics, units
-from fusionbench.progress import bar as progress_bar
+from fusionbench.files.progress import bar as progress_bar
+from fusionbench.scoring import metrics
+from fusionbench.simulation import units
 
 from . import angles, model
 from .simulator import simulate
@@ -94,7 +95,7 @@ class CalibrationOutput:
 
 def run_calibration(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None):
     """Monte Carlo of a platform-rolling scenario (see the module notes); returns a CalibrationOutput.
-    ``progress``: a bar over runs (:func:`fusionbench.progress.bar`: None shows one on a terminal)."""
+    ``progress``: a bar over runs (:func:`fusionbench.files.progress.bar`: None shows one on a terminal)."""
     methods = list(methods or scn.methods)
     for m in methods:
         scn.method(m)

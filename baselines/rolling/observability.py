@@ -82,7 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 from . import angles, model
 from .jacobians import error_jacobians

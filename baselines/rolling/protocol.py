@@ -20,7 +20,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from fusionbench.aligner import load_entry
+from fusionbench.methods.aligner import load_entry
 
 from . import model
 

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import figures as fg
-from fusionbench import units
-from fusionbench.figure_events import mark_events
-from fusionbench.figures import plt, save_png
-from fusionbench.imufiles import atomic_open
-from fusionbench.report import paper_section
-from fusionbench.run_metrics import write_metrics
+from fusionbench.bench.run_metrics import write_metrics
+from fusionbench.files.imufiles import atomic_open
+from fusionbench.reports import figures as fg
+from fusionbench.reports.figure_events import mark_events
+from fusionbench.reports.figures import plt, save_png
+from fusionbench.reports.report import paper_section
+from fusionbench.simulation import units
 
 from . import model
 

@@ -9,7 +9,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fusionbench import earth, units
+from fusionbench.simulation import earth, units
 
 from .model import _check_dcm
 
@@ -216,8 +216,9 @@ def commands(scheme, C0, lat):
 
 
 def scheme_events(scheme):
-    """The roll phases of a scheme as unshaded spans (:class:`fusionbench.figure_events.Event`), named by their axis."""
-    from fusionbench.figure_events import Event  # only when a figure is drawn
+    """The roll phases of a scheme as unshaded spans (:class:`fusionbench.reports.figure_events.Event`), named by
+    their axis."""
+    from fusionbench.reports.figure_events import Event  # only when a figure is drawn
 
     names = {v: k for k, v in AXES.items()}
     ev, t = [], 0.0

@@ -10,7 +10,7 @@ import numpy as np
 
 from scipy.spatial.transform import Rotation
 
-from fusionbench import earth
+from fusionbench.simulation import earth
 
 from .angles import dcm_to_angles
 from .model import N_COEFFS, PAPER_ACCEL_NOISE, PAPER_GYRO_NOISE, _check_coeffs, _check_dcm, _check_site, gyro_matrix

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fusionbench import units
+from fusionbench.simulation import units
 
 from . import model
 from .scheme import AXES, Scheme, Segment

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .. import fields
-from ..check import ABS_TOL_PERCENT
-from . import FeatureBase
+from fusionbench.bench.check import ABS_TOL_PERCENT
+from fusionbench.bench.feature import FeatureBase
+from fusionbench.simulation import fields
 
 
 @dataclass(frozen=True)

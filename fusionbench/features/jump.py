@@ -8,8 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import fields, metrics, units
-from . import FeatureBase
+from fusionbench.bench.feature import FeatureBase
+from fusionbench.scoring import metrics
+from fusionbench.simulation import fields, units
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,6 @@ class JumpWindow(FeatureBase):
         return "\n".join(lines) + "\n"
 
     def events(self):
-        from ..figure_events import Event
+        from fusionbench.reports.figure_events import Event
 
         return [Event(self.start_s, self.end_s, "noise-jump window")]

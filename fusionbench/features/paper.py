@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .. import fields
-from . import FeatureBase
+from fusionbench.bench.feature import FeatureBase
+from fusionbench.simulation import fields
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import fields, units
-from ..check import ABS_TOL_ARCMIN, REL_TOL
-from . import FeatureBase
+from fusionbench.bench.check import ABS_TOL_ARCMIN, REL_TOL
+from fusionbench.bench.feature import FeatureBase
+from fusionbench.simulation import fields, units
 
 
 def window(table, key, src, duration_s, label):
@@ -122,8 +122,8 @@ class AttitudeWindows(FeatureBase):
 def level_figure(out, path, win=None):
     """Level misalignment (phiE, phiN, arcmin) against time, median and 16-84 % band of every method, with the
     RMSE window ``win`` (s) shaded and the events marked (like seed 004's Figs. 9-11). Returns the Figure."""
-    from .. import figures as fg
-    from ..report import run_context
+    from fusionbench.reports import figures as fg
+    from fusionbench.reports.report import run_context
 
     c = run_context(out)
     fig, axes = fg.small_multiples(c, [(i, f"phi{'EN'[i]} (arcmin)", 0.0, False, []) for i in range(2)],

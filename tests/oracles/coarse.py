@@ -1,4 +1,5 @@
-"""The NumPy reference of ``coarse-i0``'s compiled pass over the samples (:func:`fusionbench.coarse_kernel.body_pass`).
+"""The NumPy reference of ``coarse-i0``'s compiled pass over the samples
+(:func:`fusionbench.methods.coarse_kernel.body_pass`).
 
 A Python step per sample over all runs at once, the kernel's arithmetic; ``tests/test_coarse.py`` holds the method
 to it. ``PATCH`` names the library's function it stands in for, for ``monkeypatch.setattr``.
@@ -10,7 +11,7 @@ import numpy as np
 
 
 def body_pass_numpy(C_b, dv_b, dt, ckeep, vkeep, C_out, V_out, P_out):
-    """:func:`fusionbench.coarse_kernel.body_pass` in NumPy (its arguments and effects)."""
+    """:func:`fusionbench.methods.coarse_kernel.body_pass` in NumPy (its arguments and effects)."""
     R, N = dv_b.shape[:2]
     C = np.broadcast_to(np.eye(3), (R, 3, 3)).copy()
     V = np.zeros((R, 3))
@@ -32,4 +33,4 @@ def body_pass_numpy(C_b, dv_b, dt, ckeep, vkeep, C_out, V_out, P_out):
 
 
 #: (module, attribute, oracle): the library function this oracle replaces.
-PATCH = ("fusionbench.coarse", "body_pass", body_pass_numpy)
+PATCH = ("fusionbench.methods.coarse_i0", "body_pass", body_pass_numpy)

@@ -16,9 +16,9 @@ import numpy as np
 
 from adrc.eso_td_estimator import expanding_memory_gains
 from adrc.eso_td_rows import INTERVAL
-from fusionbench import earth
-from fusionbench.aiding_geometry import lever_offset, lever_velocity, rate_at
-from fusionbench.attitude import apply_misalignment
+from fusionbench.simulation import earth
+from fusionbench.simulation.aiding_geometry import lever_offset, lever_velocity, rate_at
+from fusionbench.simulation.attitude import apply_misalignment
 
 
 def run_numpy(est, sd, dth_b, dv_b, hist_C, hist_psi, hist_fb, hist_y):

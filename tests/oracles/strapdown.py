@@ -1,4 +1,5 @@
-"""The NumPy reference of the compiled strapdown loop (:func:`fusionbench.strapdown_compiled._integrate_numba`).
+"""The NumPy reference of the compiled strapdown loop
+(:func:`fusionbench.simulation.strapdown_compiled._integrate_numba`).
 
 A Python loop over samples with arrays over runs that makes the kernel's operations in its order; the tests hold the
 kernel to it (``tests/test_strapdown.py``) and ``benchmarks/perf_core.py`` times the two side by side. ``PATCH`` names
@@ -9,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusionbench import earth
-from fusionbench.strapdown import _cross, body_increments, rodrigues
+from fusionbench.simulation import earth
+from fusionbench.simulation.strapdown import _cross, body_increments, rodrigues
 
 
 def integrate_numpy(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
@@ -55,4 +56,4 @@ def integrate_numpy(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, d
 
 
 #: (module, attribute, oracle): the library function this oracle replaces.
-PATCH = ("fusionbench.strapdown", "_integrate_numba", integrate_numpy)
+PATCH = ("fusionbench.simulation.strapdown", "_integrate_numba", integrate_numpy)
