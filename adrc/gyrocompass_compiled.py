@@ -27,9 +27,9 @@ def adrc_steps(arrays, gains, b0, z, u, fit_from, record, hist_C, tilt, rec_t_su
 
     Parameters
     ----------
-    arrays : tuple
-        The loop's strapdown and azimuth fit (:func:`fusionbench.methods.compass_compiled.loop_arrays`), updated in
-        place.
+    arrays : fusionbench.methods.compass_compiled.LoopArrays
+        The loop's strapdown and azimuth fit (:func:`~fusionbench.methods.compass_compiled.loop_arrays`), updated
+        in place.
     gains : ndarray, shape (9,)
         ``beta01, beta02, beta03, delta, delta ** 0.5, delta ** 0.75, r1, h1, c1``.
     b0 : ndarray, shape (2,)
@@ -50,8 +50,8 @@ def adrc_steps(arrays, gains, b0, z, u, fit_from, record, hist_C, tilt, rec_t_su
         Written: the fit's sums at the recorded steps.
     """
     beta01, beta02, beta03, delta, div_half, div_quarter, r1, h1, c1 = gains
-    C0, t_sums, sums, h = arrays[0][0], arrays[1][4], arrays[1][5], arrays[6][0]
-    steps, runs, m = arrays[2].shape[0], arrays[2].shape[1], arrays[2].shape[2]
+    C0, t_sums, sums, h = arrays.sd_state.C_bn, arrays.fit_state.t_sums, arrays.fit_state.sums, arrays.fit_consts.h
+    steps, runs, m = arrays.dth.shape[0], arrays.dth.shape[1], arrays.dth.shape[2]
     work, omega, dv, applied = work_arrays(runs, m), np.empty((runs, 3)), np.empty((runs, 3)), np.empty((runs, 2))
     for j in range(steps):
         for r in range(runs):

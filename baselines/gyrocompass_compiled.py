@@ -26,9 +26,9 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
 
     Parameters
     ----------
-    arrays : tuple
-        The loop's strapdown and azimuth fit (:func:`fusionbench.methods.compass_compiled.loop_arrays`), updated in
-        place.
+    arrays : fusionbench.methods.compass_compiled.LoopArrays
+        The loop's strapdown and azimuth fit (:func:`~fusionbench.methods.compass_compiled.loop_arrays`), updated
+        in place.
     j0 : int
         First step.
     resume : bool
@@ -52,8 +52,9 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
     int
         The shot's step if it stopped there (strapdown and fit done), else the number of steps.
     """
-    C0, v0, h, wN = arrays[0][0], arrays[0][1], arrays[6][0], arrays[6][2]  # wN: OMEGA_IE cos L, as PIDLoops.wN
-    steps, runs, m = arrays[2].shape[0], arrays[2].shape[1], arrays[2].shape[2]
+    C0, v0 = arrays.sd_state.C_bn, arrays.sd_state.v_n
+    h, wN = arrays.fit_consts.h, arrays.fit_consts.wN  # wN: OMEGA_IE cos L, as PIDLoops.wN
+    steps, runs, m = arrays.dth.shape[0], arrays.dth.shape[1], arrays.dth.shape[2]
     work, dv, dv_en = work_arrays(runs, m), np.empty((runs, 3)), np.empty((runs, 2))
     for j in range(j0, steps):
         if not (resume and j == j0):

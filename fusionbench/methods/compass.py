@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fusionbench.methods.compass_compiled import FitState
 from fusionbench.simulation import earth
 from fusionbench.simulation.attitude import euler_to_dcm
 from fusionbench.simulation.strapdown import NavState, Strapdown
@@ -95,8 +96,8 @@ class AzimuthFit:
 
     def compiled_state(self):
         """The arrays :func:`fusionbench.methods.compass_compiled.fit_add` updates in place, in its argument order:
-        ``I, D, V, prev_dv, t_sums, sums, count`` (a compiled loop adds its steps to this very fit)."""
-        return self.I, self.D, self.V, self._prev_dv, self.t_sums, self.sums, self._count
+        a :data:`~fusionbench.methods.compass_compiled.FitState` (a compiled loop adds its steps to this very fit)."""
+        return FitState(self.I, self.D, self.V, self._prev_dv, self.t_sums, self.sums, self._count)
 
     def add(self, dv_en, w_c_en):
         """Add one step.

@@ -16,15 +16,32 @@ at run time (``two``).
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba
 import numpy as np
 
 from fusionbench.simulation.strapdown_compiled import integrate_compiled
 
+#: An :class:`fusionbench.methods.compass.AzimuthFit`'s arrays, updated in place by :func:`fit_add`: the integrals
+#: ``I`` and double integrals ``D`` (R, 3) of [w_cE, w_cN, 1] (rad, rad s; s, s^2), the integrals ``V`` (R, 2) of
+#: [dvE, dvN] (m), the last step's velocity errors ``prev_dv`` (R, 2) m/s, the sums ``t_sums`` (3,) of tau^0..2 and
+#: ``sums`` (R, 9) per run (:class:`~fusionbench.methods.compass.AzimuthFit`), the step count ``count`` (1,) int.
+FitState = namedtuple("FitState", "I D V prev_dv t_sums sums count")
+#: The fit's constants: its step ``h`` (s), gravity ``g`` (m/s^2), the horizontal and vertical earth rates ``wN``,
+#: ``wU`` (rad/s) and ``two`` (2.0 at run time: module docstring).
+FitConsts = namedtuple("FitConsts", "h g wN wU two")
+#: What a compiled control loop works on (:func:`loop_arrays`): the strapdown's ``sd_state``
+#: (:data:`~fusionbench.simulation.strapdown_compiled.StrapdownState`) and the fit's ``fit_state`` (:data:`FitState`),
+#: both updated in place; the increments ``dth``, ``dvel`` (steps, R, m, 3), rad, m/s, body frame, one block per
+#: step; ``vref`` (steps, R, 3) the step-mean reference velocity, m/s ENU, or (0, R, 3) without one; ``dt`` the
+#: sample interval, s; ``fit_consts`` (:data:`FitConsts`).
+LoopArrays = namedtuple("LoopArrays", "sd_state fit_state dth dvel vref dt fit_consts")
+
 
 def loop_arrays(loop, fit):
-    """The arrays a compiled control loop works on, as one tuple ``(sd_state, fit_state, dth, dvel, vref, dt,
-    fit_consts)`` (the first argument of :func:`command_step` and :func:`fit_step`).
+    """The arrays a compiled control loop works on, a :data:`LoopArrays` (the first argument of :func:`command_step`
+    and :func:`fit_step`).
 
     Parameters
     ----------
@@ -39,8 +56,8 @@ def loop_arrays(loop, fit):
         (module docstring).
     """
     vref = np.zeros((0, loop.R, 3)) if loop.vref is None else loop.vref
-    return (loop.sd.compiled_state(), fit.compiled_state(), loop.dth, loop.dv, vref, loop.sd.dt,
-            (fit.step_s, fit.g, fit.wN, fit.wU, 2.0))
+    return LoopArrays(loop.sd.compiled_state(), fit.compiled_state(), loop.dth, loop.dv, vref, loop.sd.dt,
+                      FitConsts(fit.step_s, fit.g, fit.wN, fit.wU, 2.0))
 
 
 @numba.njit(cache=True)
@@ -55,10 +72,10 @@ def command_step(arrays, j, omega, work, dv):
     samples through the strapdown with the commanded rate ``omega`` (R, 3), rad/s, ENU, held; ``dv`` (R, 3) is then the
     velocity error against the reference, m/s (the velocity itself without one).
 
-    ``arrays`` is :func:`loop_arrays`'s tuple, ``work`` :func:`work_arrays`'s.
+    ``arrays`` is a :data:`LoopArrays`, ``work`` :func:`work_arrays`'s tuple.
     """
-    C0, v0, lat0, lon0, h0, vp0, thp, dvp = arrays[0]
-    dth, dvel, dt = arrays[2][j], arrays[3][j], arrays[5]
+    C0, v0, lat0, lon0, h0, vp0, thp, dvp = arrays.sd_state
+    dth, dvel, dt = arrays.dth[j], arrays.dvel[j], arrays.dt
     cmd, rec_C, rec_v, rec_p = work
     runs, m = dth.shape[0], dth.shape[1]
     for r in range(runs):
@@ -71,9 +88,8 @@ def command_step(arrays, j, omega, work, dv):
 @numba.njit(cache=True)
 def velocity_error(arrays, j, dv):
     """``dv`` (R, 3) = the strapdown's velocity less the reference of step ``j`` (m/s; the velocity itself without
-    a reference), as :class:`fusionbench.methods.compass.CommandLoop` yields it; ``arrays`` is :func:`loop_arrays`'s
-    tuple."""
-    v_n, vref = arrays[0][1], arrays[4]
+    a reference), as :class:`fusionbench.methods.compass.CommandLoop` yields it; ``arrays`` is a :data:`LoopArrays`."""
+    v_n, vref = arrays.sd_state.v_n, arrays.vref
     for r in range(v_n.shape[0]):
         for i in range(3):
             dv[r, i] = v_n[r, i] - vref[j, r, i] if vref.shape[0] else v_n[r, i]
@@ -83,9 +99,9 @@ def velocity_error(arrays, j, dv):
 def fit_step(arrays, dv_en, w_c):
     """Add a step to the loop's :class:`fusionbench.methods.compass.AzimuthFit` (:func:`fit_add`): the velocity errors
     ``dv_en`` (R, >= 2) [dvE, dvN], m/s, at the end of the step, the commands ``w_c`` (R, >= 2) [w_cE, w_cN],
-    rad/s, applied during it; ``arrays`` is :func:`loop_arrays`'s tuple."""
-    h, g, wN, wU, two = arrays[6]
-    fit_add(arrays[1], dv_en, w_c, h, g, wN, wU, two)
+    rad/s, applied during it; ``arrays`` is a :data:`LoopArrays`."""
+    c = arrays.fit_consts
+    fit_add(arrays.fit_state, dv_en, w_c, c.h, c.g, c.wN, c.wU, c.two)
 
 
 @numba.njit(cache=True)
@@ -94,7 +110,7 @@ def fit_add(fit_state, dv_en, w_c, h, g, wN, wU, two):
 
     Parameters
     ----------
-    fit_state : tuple
+    fit_state : FitState
         ``I, D, V, prev_dv, t_sums, sums, count`` of the fit.
     dv_en : ndarray, shape (R, 2)
         Velocity errors [dvE, dvN] at the end of the step, m/s.

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusionbench.simulation.strapdown_compiled import _integrate_numba
+from fusionbench.simulation.strapdown_compiled import StrapdownState, _integrate_numba
 
 _I3 = np.eye(3)
 
@@ -186,7 +186,8 @@ class Strapdown:
 
     def compiled_state(self):
         """The state arrays :func:`fusionbench.simulation.strapdown_compiled.integrate_compiled` updates in place, in
-        its argument order: ``C_bn, v_n, lat, lon, h, v_prev, dtheta_prev, dvel_prev``.
+        its argument order, as a :data:`~fusionbench.simulation.strapdown_compiled.StrapdownState`: ``C_bn, v_n,
+        lat, lon, h, v_prev, dtheta_prev, dvel_prev``.
 
         For loops that feed back into the strapdown every few samples (damping networks, compass
         loops) written as compiled code: they call ``integrate_compiled(*state, dtheta, dvel, cmd,
@@ -194,7 +195,7 @@ class Strapdown:
         exactly as :meth:`run` does, and this object stays consistent for later :meth:`run` calls.
         """
         s = self.state
-        return s.C_bn, s.v_n, s.lat, s.lon, s.h, self._v_prev, self._th_prev, self._dv_prev
+        return StrapdownState(s.C_bn, s.v_n, s.lat, s.lon, s.h, self._v_prev, self._th_prev, self._dv_prev)
 
     def run(self, dtheta, dvel, omega_cmd=None, record_every=1):
         """Integrate a chunk of increments.

@@ -11,10 +11,18 @@ arrays of :meth:`fusionbench.simulation.strapdown.Strapdown.compiled_state`. Thi
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba
 import numpy as np
 
 from fusionbench.simulation import earth
+
+#: The state arrays :func:`integrate_compiled` updates in place, in its argument order (numba types a namedtuple by
+#: its fields): ``C_bn`` (R, 3, 3) body RFU to ENU, ``v_n`` (R, 3) m/s ENU, ``lat``, ``lon`` (R,) rad, ``h`` (R,) m,
+#: and the previous sample's velocity (R, 3) m/s, angle and velocity increments (R, 3) rad, m/s (for the coning and
+#: sculling terms). :meth:`fusionbench.simulation.strapdown.Strapdown.compiled_state` returns one.
+StrapdownState = namedtuple("StrapdownState", "C_bn v_n lat lon h v_prev dtheta_prev dvel_prev")
 
 _somigliana = numba.njit(cache=True)(earth.somigliana)
 _radii = numba.njit(cache=True)(earth.radii_from_sin2)
