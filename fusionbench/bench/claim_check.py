@@ -31,9 +31,10 @@ seed 000's Table-1 mooring (5-9 deg), navigation, 600 s         1.3e3           
 seed 004's sea sway (1.2, 1.2, 0.8 deg), tactical, 600 s        2.2e4           176              sway
 ==============================================================  ==============  ===============  ======
 
-A sway below the gyros' noise (0.001 deg under a tactical gyro, 0.01 deg under a MEMS one) counts as static: its
-rate is lost in the record's noise, for the method too. Noise correlated over more than a sub-block (an output
-low-passed at a tenth of the sample rate or less) raises the ratio of a static record toward the threshold.
+Seed 000 is Zhou 2011 (ADRC gyrocompass), seed 004 Gu 2017 (adaptive Schuler damping). A sway below the gyros' noise
+(0.001 deg under a tactical gyro, 0.01 deg under a MEMS one) counts as static: its rate is lost in the record's
+noise, for the method too. Noise correlated over more than a sub-block (an output low-passed at a tenth of the
+sample rate or less) raises the ratio of a static record toward the threshold.
 """
 
 from __future__ import annotations

@@ -10,7 +10,8 @@ averaged over blocks of a sixth of the window, which a sway's or moored ship's o
 change of velocity does not. The worst window's RMS of those block means, m/s, is held to
 :func:`threshold_mps` (0.15 m/s plus the gyros' drift, which grows with the square of the window), on three
 scales (:func:`scales`): 60-s windows see a brief change of velocity, 120-s windows and the whole record a steady
-acceleration, which a short window takes for a tilt. Worst residual over its threshold, per scale:
+acceleration, which a short window takes for a tilt. Worst residual over its threshold, per scale (seed 000: Zhou
+2011, the ADRC gyrocompass, whose Table 1 gives the sway):
 
 ==================================================  ======  ======  ============
 record (simulated, 50 Hz, 3 runs)                   60 s    120 s   whole record

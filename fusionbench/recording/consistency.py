@@ -21,9 +21,9 @@ what the data allow: two independent windows each at the bound disagree by about
 (:func:`expected_disagreement` adds the carry's own noise). A method within it, and within it of the
 others, does as well as the data allow.
 
-A moving base is checked with its receiver's rows (:class:`fusionbench.simulation.aiding.Aiding`): each window gets
-the rows valid in it and starts at their first position (:func:`window_site`). The carry leaves out the transport rate
-``v / R`` (at 10 m/s 2 % of the earth rate: some 1.6 arcmin over a 300-s carry).
+A moving base is checked with its receiver's rows (:class:`~fusionbench.simulation.aiding.Aiding`): each window
+gets the rows valid in it and starts at their first position (:func:`window_site`). The carry leaves out the
+transport rate ``v / R`` (at 10 m/s 2 % of the earth rate: some 1.6 arcmin over a 300-s carry).
 
 Frames: body RFU (x right, y forward, z up), navigation ENU fixed to the earth at the site; attitude
 ``C_bn``; misalignment as :mod:`fusionbench.simulation.attitude`. Report and figure:
@@ -68,9 +68,8 @@ class Consistency:
     refused : list of list of str or None
         ``refused[m][k]``: method m's one-line refusal of window k, or None when it aligned it.
     disagreement : ndarray, shape (M, K - 1, 3)
-        Window k+1's attitude against window k's carried to ``t_end[k + 1]``: ``d`` with
-        ``C_{k+1} = exp(-[d x]) carry(C_k)``, rad, ENU (east, north: level; up: azimuth); NaN where either window
-        was refused. Pair k ends at ``t_end[k + 1]``.
+        Window k+1's attitude against window k's carried to ``t_end[k + 1]`` (where pair k ends): ``d`` with
+        ``C_{k+1} = exp(-[d x]) carry(C_k)``, rad, ENU (east, north: level; up: azimuth); NaN where one is refused.
     disagreement_euler : ndarray, shape (M, K - 1, 3)
         The same pair as Euler-angle differences ``[pitch, roll, yaw]`` (window k+1 minus carried window k), rad.
     agreement : ndarray, shape (M, K, 3)
@@ -190,8 +189,7 @@ def carry(C_bn, imu: IMUData, t_from: float, t_to: float, site: Site, run: int =
     imu : IMUData
         The recording; ``run`` selects one of its recordings.
     t_from, t_to : float
-        Times, s: increment end times of ``imu`` (``imu.increments()[0]``) or its initial state ``imu.t0``;
-        ``t_from <= t_to``.
+        Times, s, ``t_from <= t_to``: increment end times of ``imu`` (``imu.increments()[0]``) or ``imu.t0``.
     site : Site
 
     Returns
@@ -367,8 +365,7 @@ def consistency(imu: IMUData, site: Site, methods, window_s: float = 300.0, imu_
     n, spans = window_bounds(imu, window_s)
     if aiding is not None:
         if not isinstance(aiding, Aiding):
-            raise ValueError("consistency aiding: expected a fusionbench.simulation.aiding.Aiding, "
-                             f"found {type(aiding).__name__}")
+            raise ValueError(f"consistency aiding: expected an Aiding, found {type(aiding).__name__}")
         aiding.check_record(imu.t0, imu.t_last, imu.dt, "consistency")
     C, refused, aiding_rows = _align_all(imu, site, methods, imu_model, spans, progress, aiding)
     if all(r is not None for rows in refused for r in rows):
