@@ -78,3 +78,37 @@ def engines_agree(a, b, roundings):
                                                                              for k in a.series]
     for x, y in pairs:
         agree_to_rounding(x, y, roundings)
+
+
+# -------------------------------------------------- the command line's failures: tests/test_cli_failures*.py
+
+TINY = """name = "tiny-cli"
+description = "30 s static at 50 Hz, 2 runs"
+duration_s = 30.0
+rate_hz = 50.0
+runs = 2
+methods = ["coarse"]
+[site]
+lat_deg = 34.0
+[imu]
+preset = "navigation"
+"""
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    p = tmp_path / "tiny.toml"
+    p.write_text(TINY)
+    return p
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A 60-s stationary CSV recording at 50 Hz."""
+    from fusionbench.files.imufiles import write_csv
+    from fusionbench.simulation import trajectory as tj
+    from fusionbench.simulation.imu import PRESETS, simulate
+
+    tr = tj.Trajectory(0.6, 0.0, 0.0, tj.EulerSway(mean=(0.0, 0.0, 1.0)), duration=60.0)
+    data = simulate(tr, PRESETS["navigation"].noise_free(), 0.02)
+    return write_csv(tmp_path_factory.mktemp("rec") / "still.csv", data)

@@ -6,37 +6,32 @@ fusionbench.simulation.units. Read back, the arrays must equal the original to f
 them from the true initial state must reach the true attitude and velocity at the last sample within bounds that a
 read one sample late, or with a wrong axis, exceeds a hundred times over (both reads are made and shown to fail).
 Real pyins files, written by pyins itself, go through the pyins layouts: a sway through the strapdown, a static
-record through the analytic coarse alignment.
+record through the analytic coarse alignment. Bad files and format files: tests/test_layouts_errors.py; the axes
+and docs/layouts.md: tests/test_layouts_definitions.py.
 """
 
-import ast
 import dataclasses
-import os
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from fusionbench.files.imufiles import IMUFileError, read_csv, write_csv
-from fusionbench.files.layouts import (AXES, BUILTIN_LAYOUTS, Layout, layout_from_name_or_file, load_layout,
-                                 read_layout)
+from fusionbench.files.imufiles import read_csv, write_csv
+from fusionbench.files.layouts import BUILTIN_LAYOUTS, layout_from_name_or_file, read_layout
 from fusionbench.methods.aligner import Site
 from fusionbench.methods.coarse import CoarseAligner
 from fusionbench.simulation import attitude, trajectory as tj
-from fusionbench.simulation.fields import FieldError
 from fusionbench.simulation.imu import IMUSpec, simulate
 from fusionbench.simulation.imudata import IMUData
 from fusionbench.simulation.strapdown import NavState, Strapdown
 from fusionbench.simulation.units import ARCSEC, DEG, DEG_PER_H, DEG_PER_S, G0, MICROSECOND, MILLISECOND, NANOSECOND
 from tests.independent import P as P_PYINS
+from tests.layouts_helpers import DIRS, LETTERS
 
 LAT, LON, H = 34 * DEG, 108 * DEG, 450.0
 DT = 0.01
 N = 3130  # 31.3 s: the sway's rates at the end differ from those at the start, so a time shift shows
-#: The file's x, y, z by letter: R right, L left, F forward, B back, U up, D down, in RFU coordinates.
-DIRS = {"R": (1, 0, 0), "L": (-1, 0, 0), "F": (0, 1, 0), "B": (0, -1, 0), "U": (0, 0, 1), "D": (0, 0, -1)}
-LETTERS = {"RFU": "RFU", "FRD": "FRD", "FLU": "FLU", "NED-style": "FRD"}
 #: SI per file unit, this test's own table.
 UNIT = {"s": 1.0, "ms": MILLISECOND, "us": MICROSECOND, "ns": NANOSECOND, "rad/s": 1.0, "deg/s": DEG_PER_S,
         "deg/h": DEG_PER_H, "rad": 1.0, "deg": DEG, "arcsec": ARCSEC, "m/s^2": 1.0, "g": G0, "m/s": 1.0}
@@ -257,76 +252,6 @@ def test_a_log_with_jittered_times_is_resampled_and_lands_on_the_truth(tmp_path,
     assert att < shift_att / 100 and vel < shift_v / 1000
 
 
-@pytest.mark.parametrize("what, words", [
-    ("gap", ["gap in time at row 3 (line 4)", "step 0.01 s after 456300.01 s, 2 times the nominal step 0.005 s: "
-                                              "about 1 sample(s) missing"]),
-    ("duplicate", ["time not strictly increasing at row 3 (line 4): a duplicate time, t=456300.01 s after "
-                   "456300.01 s"]),
-    ("reversal", ["time not strictly increasing at row 3 (line 4): a reversal, t=456300.005 s after 456300.01 s"]),
-    ("short", ["time step too short at row 3 (line 4): step 0.001 s", "0.2 times the nominal step"]),
-])
-def test_bad_times_in_a_kf_gins_log_name_the_row(tmp_path, what, words):
-    stamps = {"gap": "456300.02", "duplicate": "456300.01", "reversal": "456300.005", "short": "456300.011"}
-    rows = _kfgins_rows(8).splitlines()
-    if what == "gap":  # row 3 onwards a step later: one sample missing
-        rows = rows[:3] + rows[4:]
-    else:
-        rows[3] = " ".join([stamps[what]] + rows[3].split()[1:])
-    p = tmp_path / "k.txt"
-    p.write_text("\n".join(rows) + "\n")
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "kf-gins")
-    _one_line(ei, "k.txt", *words)
-
-
-def test_a_path_may_be_bytes_or_path_like(tmp_path):
-    p = tmp_path / "k.txt"
-    p.write_text(_kfgins_rows(5))
-    want, _ = read_layout(p, "kf-gins")
-    for path in (os.fsencode(p), str(p)):
-        got, meta = read_layout(path, "kf-gins")
-        assert meta["path"] == str(p) and np.array_equal(got.gyro, want.gyro)
-    with pytest.raises(TypeError, match="expected a str, bytes or os.PathLike, found int"):
-        read_layout(7, "kf-gins")
-
-
-# ------------------------------------------------------------------------------------------------ the axes
-
-
-#: Known motions: (what, RFU vector, the file's x, y, z for RFU, FRD, FLU); written by hand from the definitions.
-MOTIONS = [
-    ("yaw rate to the left (about up)", "gyro", (0, 0, 2), {"RFU": (0, 0, 2), "FRD": (0, 0, -2), "FLU": (0, 0, 2)}),
-    ("roll rate, right side down (about forward)", "gyro", (0, 3, 0),
-     {"RFU": (0, 3, 0), "FRD": (3, 0, 0), "FLU": (3, 0, 0)}),
-    ("pitch rate, nose up (about right)", "gyro", (5, 0, 0), {"RFU": (5, 0, 0), "FRD": (0, 5, 0), "FLU": (0, -5, 0)}),
-    ("forward specific force", "accel", (0, 7, 0), {"RFU": (0, 7, 0), "FRD": (7, 0, 0), "FLU": (7, 0, 0)}),
-    ("specific force to the right", "accel", (4, 0, 0), {"RFU": (4, 0, 0), "FRD": (0, 4, 0), "FLU": (0, -4, 0)}),
-    ("level and still: specific force up", "accel", (0, 0, 9.8),
-     {"RFU": (0, 0, 9.8), "FRD": (0, 0, -9.8), "FLU": (0, 0, 9.8)}),
-]
-
-
-@pytest.mark.parametrize("axes", ["RFU", "FRD", "FLU", "NED-style"])
-@pytest.mark.parametrize("what,sensor,rfu,files", MOTIONS, ids=[m[0] for m in MOTIONS])
-def test_known_motion_lands_on_the_right_rfu_axis(tmp_path, axes, what, sensor, rfu, files):
-    v = np.array(files[LETTERS[axes]], dtype=float)
-    g, a = (v, np.zeros(3)) if sensor == "gyro" else (np.zeros(3), v)
-    path = tmp_path / "m.txt"
-    path.write_text("".join(f"{k * 0.1} {' '.join(map(str, g))} {' '.join(map(str, a))}\n" for k in range(3)))
-    imu, _ = read_layout(path, Layout(axes=axes))
-    np.testing.assert_array_equal((imu.gyro if sensor == "gyro" else imu.accel)[0], np.tile(rfu, (3, 1)))
-    np.testing.assert_array_equal((imu.accel if sensor == "gyro" else imu.gyro)[0], np.zeros((3, 3)))
-
-
-def test_axes_matrices_are_the_letter_definitions():
-    for name, M in AXES.items():
-        # column j of M is the direction file axis j names, in RFU
-        np.testing.assert_array_equal(M, np.array([DIRS[c] for c in LETTERS[name]], dtype=float).T)
-        assert np.linalg.det(M) == 1.0  # a proper rotation: the file's axes are right-handed
-    np.testing.assert_array_equal(AXES["FRD"], P_PYINS)  # the map tests/independent.py uses for pyins
-    assert AXES["NED-style"] is AXES["FRD"]
-
-
 # ------------------------------------------------------------------------------------------- real pyins files
 
 
@@ -416,196 +341,3 @@ def test_coarse_alignment_of_a_pyins_file_gives_pyins_attitude(tmp_path, record_
     np.testing.assert_allclose(angles, [-5.0, 3.0, -120.0], atol=1e-6)
     wrong, _ = read_layout(tmp_path / "static.csv", dataclasses.replace(BUILTIN_LAYOUTS["pyins"], axes="RFU"))
     assert np.linalg.norm(attitude.misalignment(CoarseAligner().align(wrong, site).C_bn_final[0], truth)) > 1.0
-
-
-# ------------------------------------------------------------------------------------------------ bad input
-
-
-def _one_line(exc_info, *words):
-    msg = str(exc_info.value)
-    assert "\n" not in msg, msg
-    for w in words:
-        assert w in msg, (w, msg)
-    return msg
-
-
-def _kfgins_rows(n=5, cols=7):
-    return "".join(" ".join(str(v) for v in [456300 + 0.005 * k, 1e-6, 2e-6, 3e-6, 1e-3, 2e-3, 0.049][:cols]) + "\n"
-                   for k in range(n))
-
-
-def test_missing_column_name(tmp_path):
-    p = tmp_path / "p.csv"
-    p.write_text("time,gyro_x,gyr_y,gyro_z,accel_x,accel_y,accel_z\n" + "0,0,0,0,0,0,9.8\n0.1,0,0,0,0,0,9.8\n")
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "pyins")
-    _one_line(ei, "p.csv", "column 'gyro_y' (gyro y) missing from the header", "gyr_y")
-
-
-def test_column_index_out_of_range(tmp_path):
-    p = tmp_path / "k.txt"
-    p.write_text(_kfgins_rows(cols=6))
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "kf-gins")
-    _one_line(ei, "k.txt", "column 6 (accel z) out of range", "row 0 (line 1) has 6 fields")
-
-
-def test_non_numeric_cell_names_row_line_and_column(tmp_path):
-    p = tmp_path / "k.txt"
-    rows = _kfgins_rows().splitlines()
-    rows[3] = rows[3].replace("3e-06", "3e-06x")
-    p.write_text("# KF-GINS\n" + "\n".join(rows) + "\n")
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "kf-gins")
-    _one_line(ei, "k.txt", "non-numeric value '3e-06x' at row 3 (line 5), column 3 (gyro z)")
-
-
-def test_header_where_none_is_expected_and_no_comment_prefix(tmp_path):
-    p = tmp_path / "h.csv"
-    p.write_text("time,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z\n0,0,0,0,0,0,9.8\n0.1,0,0,0,0,0,9.8\n")
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, Layout())
-    _one_line(ei, "h.csv", "non-numeric value 'time' at row 0 (line 1), column 0 (time) (a header line?")
-    p.write_text("# a comment\n0 0 0 0 0 0 9.8\n0.1 0 0 0 0 0 9.8\n")
-    assert read_layout(p, Layout())[0].samples == 2
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, Layout(comment=""))  # no comment prefix: the comment is row 0, of 3 fields
-    _one_line(ei, "h.csv", "column 3 (gyro z) out of range: row 0 (line 1) has 3 fields")
-
-
-def test_skipped_row_keeps_the_file_row_numbers(tmp_path):
-    p = tmp_path / "p.csv"
-    p.write_text("time,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z\n"
-                 + "".join(f"{0.1 * k},0,0,0,0,0,{'nan' if k == 2 else 0.98}\n" for k in range(4)))
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "pyins-increment")
-    _one_line(ei, "p.csv", "non-finite value nan at row 2 (line 4), column 'accel_z' (accel z")
-
-
-def test_out_of_range_value_names_the_file_column_and_unit(tmp_path):
-    p = tmp_path / "d.txt"  # 200 rad/s: deg/s written where rad/s was declared
-    p.write_text("".join(f"{0.1 * k} 0 200 0 0 0 9.8\n" for k in range(4)))
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, Layout())
-    _one_line(ei, "d.txt", "row 0 (line 1), column 2 (gyro y, read in rad/s)", "a unit or scaling error")
-
-
-def test_rows_of_another_width_and_bad_time(tmp_path):
-    p = tmp_path / "k.txt"
-    p.write_text(_kfgins_rows() + "456300.025 1 2 3\n")
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "kf-gins")
-    _one_line(ei, "k.txt", "row 5 (line 6) has 4 fields, expected 7 as in row 0 (line 1)")
-    p.write_text(_kfgins_rows().replace("456300.01 ", "456300.02 "))
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "kf-gins")
-    _one_line(ei, "k.txt", "time not strictly increasing at row 3 (line 4)")
-    p.write_text(_kfgins_rows(n=1))
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "kf-gins")
-    _one_line(ei, "k.txt", "too short: 1 samples")
-    p.write_text("")
-    with pytest.raises(IMUFileError) as ei:
-        read_layout(p, "pyins")
-    _one_line(ei, "k.txt", "no header line found")
-
-
-BAD_FORMATS = [
-    ("gyro_units = 'deg/s'", "field 'layout.gyro_units': unknown"),
-    ("gyro_unit = 'deg/sec'", "field 'layout.gyro_unit': expected one of ['deg/h', 'deg/s', 'rad/s'], found 'deg/sec'"),
-    ("kind = 'increment'\ngyro_unit = 'deg/s'", "field 'layout.gyro_unit': expected one of ['arcsec', 'deg', 'rad']"),
-    ("accel_unit = 'ft/s^2'", "field 'layout.accel_unit'"),
-    ("time_unit = 'min'", "field 'layout.time_unit'"),
-    ("axes = 'ENU'", "field 'layout.axes': expected one of ['FLU', 'FRD', 'NED-style', 'RFU'], found 'ENU'"),
-    ("delimiter = 'tab'", "field 'layout.delimiter'"),
-    ("header = 'yes'", "field 'layout.header': expected true or false"),
-    ("gyro = ['gx', 'gy', 'gz']", "field 'layout.gyro': a column name ('gx') needs header = true"),
-    ("gyro = [1, 2]", "field 'layout.gyro': expected 3 columns"),
-    ("time = -1", "field 'layout.time': expected a column"),
-    ("accel = [4, 5, 1]", "field 'layout.accel': column 1 is already the gyro x column"),
-    ("skip_rows = 1.5", "field 'layout.skip_rows'"),
-    ("comment = '# '", "field 'layout.comment'"),
-]
-
-
-@pytest.mark.parametrize("line,expected", BAD_FORMATS, ids=[b[0].split("=")[0].strip() for b in BAD_FORMATS])
-def test_bad_format_file_is_one_line_naming_file_and_key(tmp_path, line, expected):
-    p = tmp_path / "fmt.toml"
-    p.write_text("[layout]\n" + line + "\n")
-    with pytest.raises(FieldError) as ei:
-        load_layout(p)
-    _one_line(ei, str(p), expected)
-
-
-def test_format_file_level_problems(tmp_path):
-    p = tmp_path / "fmt.toml"
-    for text, words in (("[layout]\n[extra]\n", "field 'extra': unknown"),
-                        ("kind = 'rate'\n", "field 'kind': unknown"),
-                        ("", "field 'layout': expected a [layout] table, found none"),
-                        ("[layout\n", "not valid TOML")):
-        p.write_text(text)
-        with pytest.raises(ValueError) as ei:
-            layout_from_name_or_file(str(p))
-        _one_line(ei, str(p), words)
-    with pytest.raises(ValueError) as ei:
-        layout_from_name_or_file(tmp_path / "missing.toml")
-    _one_line(ei, "missing.toml", "no such layout file")
-    with pytest.raises(ValueError) as ei:
-        layout_from_name_or_file("kfgins")
-    _one_line(ei, "expected a built-in layout (pyins, pyins-increment, kf-gins, fusionbench-csv)", "'kfgins'")
-
-
-def test_format_file_defaults_and_name(tmp_path):
-    p = tmp_path / "minimal.toml"
-    p.write_text("[layout]\n")
-    assert load_layout(p) == Layout(name="minimal")
-    lay = Layout(kind="increment")
-    assert (lay.gyro_unit, lay.accel_unit, lay.delimiter, lay.comment) == ("rad", "m/s", "auto", "#")
-    with pytest.raises(FieldError) as ei:
-        Layout(gyro_unit="deg/s", kind="increment")
-    _one_line(ei, "Layout: field 'gyro_unit'")
-
-
-# ---------------------------------------------------------------------------------------- docs/layouts.md
-
-DOC = (Path(__file__).parents[1] / "docs" / "layouts.md").read_text()
-
-
-def _table_rows(first_header):
-    """First cells and whole rows of the markdown table whose header row starts with ``| first_header |``."""
-    lines = DOC.splitlines()
-    start = next(i for i, s in enumerate(lines[:-1])
-                 if s.startswith(f"| {first_header} |") and lines[i + 1].startswith("|---"))
-    rows = []
-    for s in lines[start + 2:]:
-        if not s.startswith("|"):
-            break
-        rows.append(s)
-    return {row.split("|")[1].strip().strip("`"): row for row in rows}
-
-
-def test_doc_documents_every_key_axes_and_builtin(tmp_path):
-    from fusionbench.files.layouts import LAYOUT_KEYS
-
-    assert sorted(_table_rows("key")) == sorted(LAYOUT_KEYS)
-    assert sorted(_table_rows("name")) == sorted(BUILTIN_LAYOUTS)
-    axes = _table_rows("`axes`")
-    assert sorted(axes) == sorted(AXES)
-    for name, row in axes.items():
-        shown = row.split("`")[-2] if name != "NED-style" else None
-        if shown:
-            np.testing.assert_array_equal(np.array(ast.literal_eval(shown), dtype=float), AXES[name])
-
-
-def test_doc_example_loads(tmp_path):
-    example = DOC.split("```toml\n", 1)[1].split("```", 1)[0]
-    (tmp_path / "my.toml").write_text(example)
-    lay = load_layout(tmp_path / "my.toml")
-    assert (lay.name, lay.delimiter, lay.time, lay.gyro, lay.time_unit, lay.gyro_unit, lay.accel_unit, lay.axes) == (
-        "my-logger", ";", "ms", ("wx", "wy", "wz"), "ms", "deg/s", "g", "FLU")
-    p = tmp_path / "log.txt"
-    p.write_text("// bench logger\nms;wx;wy;wz;fx;fy;fz;temp\n0;0;0;90;1;0;0;20\n10;0;0;90;1;0;0;20\n")
-    imu, _ = read_layout(p, lay)
-    np.testing.assert_allclose(imu.t, [0.0, 0.01], rtol=0, atol=1e-18)
-    np.testing.assert_allclose(imu.gyro[0, 0], [0.0, 0.0, 90 * DEG], rtol=1e-15)  # up is up in FLU
-    np.testing.assert_allclose(imu.accel[0, 0], [0.0, G0, 0.0], rtol=1e-15)  # FLU x is forward
