@@ -7,7 +7,7 @@ The format, every key with its type, unit, default and allowed range (``[quick]`
 ``[motion]`` (segments, a disturbance, or a drive's legs), ``[imu]`` with its presets, datasheet-unit overrides and
 noise schedules, ``[vref]`` or ``[aiding]`` (a receiver: :mod:`fusionbench.bench.scenarios.tables`), ``[init]``,
 ``[metrics]``, ``[variants.NAME]``, ``[paper]``, the tables an experiment adds and the conformance-matrix file), is
-docs/scenarios.md; tests/test_docs.py keeps it in step with :func:`parse`. In short: angles in degrees, times in
+docs/scenarios.md; tests/test_docs*.py keep it in step with :func:`parse`. In short: angles in degrees, times in
 s, sensor figures in the datasheet units named in the key (``gyro_bias_dph``, ``arw_dpsh``, ``vrw_ug_rthz``)::
 
     name = "static-34n"
