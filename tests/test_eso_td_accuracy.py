@@ -25,7 +25,7 @@ from fusionbench.simulation import attitude, earth, trajectory as tj, units
 from fusionbench.simulation.imu import PRESETS, VelocityReferenceSpec, simulate, simulate_vref
 from fusionbench.simulation.imudata import IMUData
 from tests.conftest import load_fixture
-from tests.test_moving_base import moving_base_limits
+from tests.moving_base_helpers import moving_base_limits
 
 D = np.pi / 180
 ARCMIN = units.ARCMIN

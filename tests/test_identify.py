@@ -1,10 +1,8 @@
 """fusionbench identify: the Allan deviation of a static record, the IEEE-952 terms fitted to it, the spec and the report.
 
-Records are simulated with known terms: white noise, random walks and quantisation by
-:func:`fusionbench.simulation.imu.simulate` on a static base; bias instability as true flicker noise made here,
-independently of the library: the rate of a continuous process of two-sided PSD B^2 / (2 pi f) (IEEE 952, annex C)
-averaged over each sample, built by FFT from its exact discrete-time spectrum (the continuous one aliased through the
-averaging), and checked to have the Allan variance (2 ln2 / pi) B^2 of the definition.
+Records are simulated with known terms (``tests/identify_helpers.py``): white noise, random walks and quantisation on a
+static base, and bias instability as true flicker noise, whose generator the first test checks against the Allan
+variance (2 ln2 / pi) B^2 of the definition. What identify does to its output folder: ``tests/test_identify_output.py``.
 
 Tolerances come from the record, not from trial: for each true term, the relative standard deviation of that term
 solved exactly from the best choice of as many octave taus as there are true terms, each Allan variance estimate
@@ -24,10 +22,9 @@ from scipy import integrate, optimize
 from scipy.stats import norm
 
 from fusionbench.recording import allanfit, identify
-from fusionbench.simulation import imu, imudata, trajectory as tj, units
+from fusionbench.simulation import imu, imudata, units
+from tests.identify_helpers import ACCEL_N, DT, GYRO_N, _flicker_psd, _record
 
-DT = 0.1
-DEG = math.pi / 180
 #: Value checks of the file: 3 records x 2 sensors x 3 axes x 2 terms.
 CHECKS = 36
 #: Two-sided z of a 0.1 % chance that any of the checks fails.
@@ -38,42 +35,6 @@ ALPHA = {"Q": 2, "N": 0, "B": -1, "K": -2, "R": -2}
 
 
 # ------------------------------------------------------------------------------------- records with known terms
-
-
-def _static(duration):
-    return tj.Trajectory(34 * DEG, 108 * DEG, 100.0, tj.EulerSway(mean=(1 * DEG, -2 * DEG, 30 * DEG)), duration=duration)
-
-
-def _flicker_psd(f, dt, b, aliases=30):
-    """Two-sided PSD at ``f`` (Hz, within Nyquist) of dt-averages of a rate with two-sided PSD b^2 / (2 pi |f|)."""
-    out = np.zeros_like(f)
-    for k in range(-aliases, aliases + 1):
-        fk = np.abs(f + k / dt)
-        out += b ** 2 / (2 * np.pi * fk) * np.sinc(fk * dt) ** 2
-    return out
-
-
-def _flicker(rng, n, dt, b, extra=8):
-    """(n, 3) flicker rate samples, generated over ``extra`` times the record so that its lowest frequencies are
-    there too."""
-    m = n * extra
-    f = np.fft.rfftfreq(m, dt)
-    amp = np.zeros_like(f)
-    amp[1:] = np.sqrt(_flicker_psd(f[1:], dt, b) / dt)  # unit white noise has two-sided PSD dt
-    return np.fft.irfft(np.fft.rfft(rng.standard_normal((m, 3)), axis=0) * amp[:, None], n=m, axis=0)[:n]
-
-
-def _record(n, gyro, accel, seed, gyro_b=0.0, accel_b=0.0, output="increment"):
-    spec = imu.IMUSpec(gyro=imu.SensorErrors(**gyro), accel=imu.SensorErrors(**accel))
-    data = imu.simulate(_static(n * DT), spec, DT, seed=seed, output=output)
-    rng = np.random.default_rng(seed + 1000)
-    per = DT if output == "increment" else 1.0
-    g, a = data.gyro.copy(), data.accel.copy()
-    if gyro_b:
-        g[0] += _flicker(rng, n, DT, gyro_b) * per
-    if accel_b:
-        a[0] += _flicker(rng, n, DT, accel_b) * per
-    return imudata.IMUData(data.t, g, a, output)
 
 
 def _tolerance(true, n, dt=DT):
@@ -98,8 +59,6 @@ def _tolerance(true, n, dt=DT):
     return {t: Z * v for t, v in best.items()}
 
 
-GYRO_N = 0.3 * units.DEG_PER_SQRT_H
-ACCEL_N = 50 * units.UG_PER_SQRT_HZ
 #: Three hours of bias instability over white noise.
 NB = dict(n=108000, gyro={"N": GYRO_N, "B": 5 * units.DEG_PER_H}, accel={"N": ACCEL_N, "B": 50 * units.UG})
 #: Three hours of rate random walk over white noise (crossing near 10 s).
@@ -335,76 +294,3 @@ def test_a_vibration_is_not_taken_for_sensor_noise(nb):
     assert [(s, ax) for s, ax, *_ in shaken.poor_fits()] == [("accel", "x"), ("accel", "y")]
     assert any(line.startswith("warning: the IEEE-952 terms do not describe accel x") for line in identify.summary(shaken))
     assert identify.poor_fit_note(nb) == ""
-
-
-# ------------------------------------------------------------------------------------------- the output folder
-
-
-def _snapshot(folder):
-    return {p.relative_to(folder).as_posix(): None if p.is_dir() else p.read_bytes()
-            for p in sorted(Path(folder).rglob("*"))}
-
-
-@pytest.fixture(scope="module")
-def small():
-    """A short white-noise record, identified in a moment."""
-    return _record(4000, {"white": (GYRO_N,) * 3}, {"white": (ACCEL_N,) * 3}, 5)
-
-
-def test_a_failing_figure_leaves_the_previous_output_as_it_was(small, tmp_path, monkeypatch):
-    import fusionbench.recording.allanplot
-
-    out = tmp_path / "id"
-    identify.run_identify(small, out, name="first")
-    before = _snapshot(out)
-    assert set(before) == {"imu_spec.toml", "identify.json", "allan.png"} and b'"first"' in before["imu_spec.toml"]
-
-    def half_then_fail(ident, path, lines):
-        Path(path).write_bytes(b"half a figure")
-        raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(fusionbench.recording.allanplot, "allan_figure", half_then_fail)
-    with pytest.raises(OSError, match="No space left"):
-        identify.run_identify(small, out, name="second")
-    assert _snapshot(out) == before and [p.name for p in tmp_path.iterdir()] == ["id"]  # no hidden folder left
-    with pytest.raises(OSError):
-        identify.write_identify_report(identify.identify(small), out)
-    assert _snapshot(out) == before
-    monkeypatch.undo()
-    identify.run_identify(small, out, name="second")  # a previous output: replaced whole
-    assert b'"second"' in (out / "imu_spec.toml").read_bytes() and set(_snapshot(out)) == set(before)
-    assert [p.name for p in tmp_path.iterdir()] == ["id"]
-
-
-@pytest.mark.parametrize("files", [
-    {"notes.txt": "mine"},
-    {"identify.json": '{"record": {}, "method": {}, "spec": {}}', "notes.txt": "mine"},  # an output, and a file of mine
-    {"identify.json": '{"record": {}}'},  # not what identify writes
-    {"metrics.json": '{"scenario": "s", "methods": {}}'},  # a run's report
-    {"consistency.json": '{"kind": "consistency"}'},  # the other command's
-])
-def test_a_folder_of_other_files_is_refused_before_any_work(small, tmp_path, monkeypatch, files):
-    out = tmp_path / "mine"
-    out.mkdir()
-    for name, text in files.items():
-        (out / name).write_text(text)
-    before = _snapshot(out)
-    monkeypatch.setattr(identify, "identify", lambda *a, **k: pytest.fail("identified before the folder was checked"))
-    for write in (lambda: identify.run_identify(small, out), lambda: identify.write_identify_report(None, out)):
-        with pytest.raises(ValueError) as err:
-            write()
-        msg = str(err.value)
-        assert "\n" not in msg and msg.startswith(f"{out}: ") and "previous fusionbench identify output" in msg
-        assert "found other files" in msg and "--out another folder" in msg
-        assert _snapshot(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
-
-
-def test_a_sub_folder_makes_a_previous_output_another_folder(small, tmp_path):
-    out = tmp_path / "id"
-    identify.run_identify(small, out)
-    (out / "allan.png").unlink()  # a previous output missing a file is still one
-    identify.run_identify(small, out)
-    (out / "data").mkdir()
-    with pytest.raises(ValueError, match="found other files"):
-        identify.run_identify(small, out)
-    assert (out / "data").is_dir()
