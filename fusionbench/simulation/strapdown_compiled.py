@@ -2,8 +2,8 @@
 
 One job: integrate a batch of body-frame increments (angle ``dtheta``, rad; velocity ``dvel``, m/s; shape
 ``(runs, n, 3)``) in the ENU navigation frame, updating the state arrays (``C_bn`` body RFU to ENU, ``v_n`` m/s ENU,
-latitude and longitude rad, height m) in place, with the same arithmetic as the NumPy reference engine
-(``fusionbench.simulation.strapdown._integrate_numpy``). :class:`fusionbench.simulation.strapdown.Strapdown` calls
+latitude and longitude rad, height m) in place, with the same arithmetic as its NumPy oracle
+(``integrate_numpy`` in ``tests/oracles/strapdown.py``). :class:`fusionbench.simulation.strapdown.Strapdown` calls
 :func:`_integrate_numba`; compiled loops (damping networks, compass loops) call :func:`integrate_compiled` on the
 arrays of :meth:`fusionbench.simulation.strapdown.Strapdown.compiled_state`. This module does not import
 :mod:`fusionbench.simulation.strapdown`.
@@ -53,7 +53,7 @@ def _rodrigues3(x, y, z, out):
 
 def _integrate_kernel(C0, v0, lat0, lon0, h0, v_prev0, th_prev, dv_prev, dtheta, dvel, cmd, dt,
                      position_fixed, height_fixed, record_every, out_C, out_v, out_p):
-    """Compiled engine: the same arithmetic as ``fusionbench.simulation.strapdown._integrate_numpy``, one run at a time.
+    """Compiled engine: the same arithmetic as the NumPy oracle (``tests/oracles/strapdown.py``), one run at a time.
 
     Compiled twice (below): serial, and with the run loop spread over threads (``prange``)."""
     runs, n = dtheta.shape[0], dtheta.shape[1]
