@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from fusionbench.methods.discovery import (METHODS_GROUP, available_methods, entry_class, load_entry,  # noqa: F401
-                                           takes_option, uses_noise_model, variant)
+                                           takes_option, unknown_option, uses_noise_model, variant)
 from fusionbench.simulation import earth
 from fusionbench.simulation.imudata import IMUData
 
@@ -272,7 +272,7 @@ def load_method(spec: str, imu=None, vref_sigma=None, **options):
     Raises
     ------
     ValueError
-        One line naming the method and what is available.
+        One line naming the method and what is available, or the option it does not take and those it does.
     """
     cls = entry_class(METHODS_GROUP, spec, "method")
     if not isinstance(cls, type):
@@ -280,6 +280,9 @@ def load_method(spec: str, imu=None, vref_sigma=None, **options):
     for key, value in (("imu", imu), ("vref_sigma", vref_sigma)):
         if value is not None and key not in options and takes_option(cls, key):
             options[key] = value
+    bad, names = unknown_option(cls, options)
+    if bad is not None:
+        raise ValueError(f"method {spec!r}: option {bad!r}: expected one of {names}")
     obj = cls(**options)
     if not isinstance(obj, Aligner):
         raise ValueError(f"method {spec!r}: expected an object with name, description, min_duration_s and align()")

@@ -52,6 +52,20 @@ def takes_option(cls, option: str) -> bool:
         return False
 
 
+def unknown_option(cls, options):
+    """The first of ``options`` (names) that the constructor of ``cls`` does not take, and the names it takes
+    (sorted): ``(None, names)`` when it takes them all, or any keyword (``**kwargs``)."""
+    try:
+        params = inspect.signature(cls).parameters
+    except (TypeError, ValueError):
+        return None, []
+    kinds = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
+    names = sorted(k for k, p in params.items() if p.kind not in kinds)
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return None, names
+    return next((key for key in options if key not in params), None), names
+
+
 def uses_noise_model(cls) -> bool:
     """Whether a method class takes an IMU model (its constructor has an ``imu`` option)."""
     return takes_option(cls, "imu")

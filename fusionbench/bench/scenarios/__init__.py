@@ -22,7 +22,6 @@ s, sensor figures in the datasheet units named in the key (``gyro_bias_dph``, ``
 
 from __future__ import annotations
 
-import inspect
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -35,6 +34,7 @@ from fusionbench.bench import feature as features
 from fusionbench.bench.experiment import ScenarioBase, load_experiment
 from fusionbench.bench.scenarios.tables import AIDING_KEYS, MAX_SPEED_MPS, MOTION_KEYS, parse_aiding, parse_motion
 from fusionbench.methods.aligner import Site, entry_class
+from fusionbench.methods.discovery import unknown_option
 from fusionbench.scoring import bound
 from fusionbench.simulation import attitude, fields, imu, trajectory
 from fusionbench.simulation.aidingsim import AidingSpec
@@ -290,14 +290,10 @@ def _check_variant_options(exp, vname, opts, src):
         cls = entry_class(exp.method_group, opts["method"], "method")
     except ValueError as exc:
         raise ScenarioError(f"{_where(src, 'variants.' + vname + '.method')}: {str(exc).splitlines()[0]}") from None
-    params = inspect.signature(cls).parameters
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        return
-    for key in opts:
-        if key != "method" and key not in params:
-            allowed = sorted(k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_POSITIONAL)
-            raise ScenarioError(f"{_where(src, f'variants.{vname}.{key}')}: unknown option of method "
-                                f"{opts['method']!r} (expected one of {allowed})")
+    key, allowed = unknown_option(cls, [k for k in opts if k != "method"])
+    if key is not None:
+        raise ScenarioError(f"{_where(src, f'variants.{vname}.{key}')}: unknown option of method "
+                            f"{opts['method']!r} (expected one of {allowed})")
 
 
 def _experiment(name, src):
