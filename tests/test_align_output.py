@@ -50,25 +50,32 @@ def sway_imu(tmp_path_factory):
                        (0.0, 0.0, 0.0), lat=LAT, lon=LON, h=H)
 
 
-def test_eso_td_told_a_tactical_imu_answers_with_the_reason_and_one_warning_line(capsys, static_csv):
-    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "eso-td", "--imu", "tactical", "--json")
+def test_eso_td_told_a_gyro_beyond_its_claim_answers_with_the_reason_and_one_warning_line(capsys, static_csv, tmp_path):
+    # the tactical preset with 2 deg/h of fixed gyro bias: beyond the 0.15 of the horizontal earth rate eso-td claims
+    # on a fixed base, short of the 0.5 at which every method refuses
+    spec = tmp_path / "fog-2dph.toml"
+    spec.write_text('[imu]\npreset = "tactical"\ngyro_bias_dph = [2.0, 2.0, 2.0]\n')
+    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "eso-td", "--imu", str(spec), "--json")
     assert status == 0, err
     res = json.loads(out)
-    # the tactical gyro: 1 deg/h fixed, 0.5 deg/h drifting, against the horizontal earth rate at 47 deg
-    bias = np.hypot(1.0, 0.5) * D / 3600.0
+    # 2 deg/h fixed, 0.5 deg/h drifting, against the horizontal earth rate at 47 deg
+    bias = np.hypot(2.0, 0.5) * D / 3600.0
     ratio = bias / (OMEGA * np.cos(LAT))
-    assert ratio == pytest.approx(0.109, abs=0.001)
+    assert ratio == pytest.approx(0.201, abs=0.001)
     reason = res["outside_claim"]
-    assert "gyro bias of IMU 'tactical'" in reason and f"{ratio:.3g} of the horizontal earth rate" in reason
-    assert "beyond the 0.05 it claims" in reason and "latitude" not in reason and "base" not in reason
+    assert "gyro bias of IMU 'fog-2dph'" in reason and f"{ratio:.3g} of the horizontal earth rate" in reason
+    assert "beyond the 0.15 it claims" in reason and "latitude" not in reason and "base" not in reason
     assert err == f"fusionbench: warning: eso-td: outside its claim: {reason}\n"
     assert res["base"] == "static" and res["limit_note"] is None
     # the existing keys are kept as they were
     assert {"method", "t_end", "C_bn", "pitch_deg", "roll_deg", "yaw_deg", "heading_deg"} <= set(res)
     # the plain output says it too
-    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "eso-td", "--imu", "tactical")
+    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "eso-td", "--imu", str(spec))
     assert status == 0 and err == f"fusionbench: warning: eso-td: outside its claim: {reason}\n"
     assert f"outside the method's claim: {reason}" in out
+    # the tactical preset itself (0.109 of the earth rate here) is claimed on a fixed base: no warning
+    status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "eso-td", "--imu", "tactical")
+    assert status == 0 and err == "" and "outside" not in out
     # kf claims it on a fixed base (up to 0.15 of the earth rate): no warning, its predicted sigma; pid too (its
     # compass loop's level pair keeps a tactical gyro's noise out of the levels: docs/methods/pid.md)
     status, out, err = fb(capsys, "align", static_csv, *SITE, "--method", "kf", "--imu", "tactical")

@@ -193,6 +193,30 @@ def test_the_papers_printed_parameters_are_kept_as_printed():
     assert a.feedback_from_s is None and a.td == "fst" and a.eso_start == "rest"
     d = ESOTDAligner()
     assert (d.beta1, d.beta2, d.td, d.eso_start) == ((0.1, 0.1), (0.0025, 0.0025), "ls", "ls")  # w0 = 0.05 rad/s
+    # the floor by the base where no gain is given: w0 = 0.2 rad/s on a fixed one, 0.05 on a moving one
+    fixed = d.for_base(fixed=True)
+    assert (fixed.beta1, fixed.beta2, d.for_base(fixed=False).beta1) == ((0.4, 0.4), (0.04, 0.04), (0.1, 0.1))
+    assert fixed.eso_floor_s < d.eso_floor_s and d.min_duration_s == d.settle_s  # 12.1 s against 48.9 s
+    assert (fixed.td_min_s, d.td_min_s, ESOTDAligner(td_min_s=5.0).for_base(fixed=True).td_min_s) == (30.0, 10.0, 5.0)
+    assert a.for_base(fixed=True) is a and ESOTDAligner(beta11=0.3).for_base(fixed=True).beta1 == (0.3, 0.4)
+
+
+def test_the_floor_is_chosen_by_the_base_the_data_are_on():
+    # static, 34 N, 10 Hz, 150 s: without aiding and with a noisy zero reference (rows at rest) eso-td runs with the
+    # fixed base's gains, bit for bit; its moving base's gains give another answer
+    lat, T, dt = 34 * D, 150.0, 0.1
+    tr = tj.Trajectory(lat, 0.0, 0.0, tj.EulerSway(mean=(0.01, -0.02, -0.5)), duration=T)
+    data = simulate(tr, PRESETS["navigation"], dt, runs=2, seed=1)
+    vref = simulate_vref(tr, VelocityReferenceSpec((0.02,) * 3), data.increments()[0], runs=2, seed=1)
+    site = Site(lat)
+
+    def final(gains=(None, None), **kw):
+        b1, b2 = gains
+        return ESOTDAligner(beta11=b1, beta12=b2, beta21=b1, beta22=b2).align(data, site, **kw).C_bn_final
+
+    for kw in ({}, {"vref": vref}):
+        np.testing.assert_array_equal(final(**kw), final(moving_base.FIXED_BASE_GAINS, **kw))
+        assert np.abs(final(**kw) - final(moving_base.MOVING_BASE_GAINS, **kw)).max() > 1e-9
 
 
 def test_a_perfect_imu_on_seed_000s_sway_lands_on_the_truth_where_the_printed_td_does_not():
