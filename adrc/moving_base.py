@@ -86,9 +86,9 @@ class ESOTDAligner(AlignerBase):
     beta11, beta12, beta21, beta22 : float, optional
         ESO gains, continuous (1/s, 1/s^2) on the east and north channels. With ``eso_start="ls"`` they
         are the floor the expanding-memory gains fall to. None (default): 2 w0 and w0^2 (a critically damped
-        observer) with w0 chosen by the base when the method runs (:data:`FIXED_BASE_GAINS`, w0 = 0.2 rad/s, without
-        aiding or with rows at rest only; :data:`MOVING_BASE_GAINS`, w0 = 0.05 rad/s, with the rows of a moving base
-        (:meth:`for_base`; docs/methods/eso-td.md for the choice).
+        observer) with w0 chosen by the base when the method runs (:meth:`for_base`): w0 = 0.2 rad/s without aiding
+        or with rows at rest only (:data:`FIXED_BASE_GAINS`), 0.05 rad/s with the rows of a moving base
+        (:data:`MOVING_BASE_GAINS`); docs/methods/eso-td.md for the choice.
     eso_start : {"ls", "rest"}
         "ls" (default): the ESO starts as the least-squares line through the velocity errors so far
         (:func:`expanding_memory_gains`) until those gains fall to beta; "rest": z1 = y, z2 = 0 and the
@@ -103,7 +103,7 @@ class ESOTDAligner(AlignerBase):
         fst TD speed factor, 1/s^2 on rad signals (500).
     td_start_s : float or "auto"
         With td="ls": time (s from the fine alignment's first row) at which the fit starts; "auto":
-        when the ESO's expanding-memory gains have reached the floor beta (2.45 / w0: 12.2 s on a fixed base,
+        when the ESO's expanding-memory gains have reached the floor beta (2.45 / w0: 12.1 s on a fixed base,
         48.9 s on a moving one with the default gains).
     td_min_s : float, optional
         With td="ls": the azimuth is reported (and fed back) once the fit spans this many seconds. None
