@@ -239,7 +239,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         t_kf = np.concatenate([[imu.t0], t_end[counts[1:] - 1]])
         T = np.diff(counts) * dt
         seg, walk = self._bias_segments(t_kf)
-        coarse_final = None if init is not None else self.coarse.align(imu, site, aiding=aiding).C_bn_final
+        warm = self._warm_runs(imu)  # a prefix of the record a prefix aligner solved: start from its solution
+        coarse_final = None if (init is not None or warm) else self.coarse.align(imu, site, aiding=aiding).C_bn_final
 
         C_out = np.empty((R, K, 3, 3))
         sig, sig_noise = np.full((R, K, 3), np.nan), np.full((R, K, 3), np.nan)
@@ -258,24 +259,25 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
             problem = build_problem(rows, site, t_end, t_kf, counts, dt, dth[r], dvel[r],
                                     None if (init is None or self.init_sigma is None) else init[r], diff)
             problem.update(seg=seg, walk=walk)
-            _, dR = _interval_rotations(problem["phi"], counts, None)
-            if init is not None:
-                start = _propagate(init[r], dR, problem["w_in"], T, forward=True)
+            if warm:
+                C_start, values, pims = self._warm_start(warm[r], counts, seg)
+                sol = self._solve(problem, C_start, values=values, pims=pims)
             else:
-                start = _propagate(orthonormalize(coarse_final[r]), dR, problem["w_in"], T, forward=False)
-            sol = self._solve(problem, start)
-            if init is not None and not sol[5]:
-                # LM stopped at its iteration limit from the given guess: start again from the coarse
-                # alignment and keep the better solution
-                if coarse_final is None:
-                    coarse_final = self.coarse.align(imu, site, aiding=aiding).C_bn_final
-                other = self._solve(problem, _propagate(orthonormalize(coarse_final[r]), dR, problem["w_in"], T,
-                                                        forward=False))
-                restarted[r] = True
-                spent = sol[3] + other[3]
-                if other[0].error(other[1]) < sol[0].error(sol[1]):
-                    sol = other
-                sol = sol[:3] + (spent,) + sol[4:]
+                _, dR = _interval_rotations(problem["phi"], counts, None)
+                start = init[r] if init is not None else orthonormalize(coarse_final[r])
+                sol = self._solve(problem, _propagate(start, dR, problem["w_in"], T, forward=init is not None))
+                if init is not None and not sol[5]:
+                    # LM stopped at its iteration limit from the given guess: start again from the coarse
+                    # alignment and keep the better solution
+                    if coarse_final is None:
+                        coarse_final = self.coarse.align(imu, site, aiding=aiding).C_bn_final
+                    other = self._solve(problem, _propagate(orthonormalize(coarse_final[r]), dR, problem["w_in"], T,
+                                                            forward=False))
+                    restarted[r] = True
+                    spent = sol[3] + other[3]
+                    if other[0].error(other[1]) < sol[0].error(sol[1]):
+                        sol = other
+                    sol = sol[:3] + (spent,) + sol[4:]
             if problem["refine_motion"]:  # rows not at every sample: the compensation from the solution's motion
                 C, t, v, b = keyframe_states(sol[1], K, seg)
                 problem = motion_from_solution(problem, site, C, v, t, b)
@@ -283,6 +285,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
                 sol = again[:3] + (sol[3] + again[3], sol[4] + again[4]) + again[5:]
             sol, more = self._refine(problem, sol)
             per_run.append(more)
+            if self._kept is not None:  # a prefix aligner keeps the record's solution to start its prefixes from
+                self._kept.append((counts, sol[1], sol[8]))
             graph, values, C_kf, iters[r], passes[r] = sol[:5]
             cost[r] = graph.error(values)
             C_out[r] = C_kf

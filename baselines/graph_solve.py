@@ -20,7 +20,63 @@ from .graph_build import GraphBuilder
 
 class GraphSolver(GraphBuilder):
     """Solves the graph of one recording (:class:`GraphBuilder`) for
-    :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``)."""
+    :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``),
+    and its record's prefixes from the whole record's solution (:meth:`prefix_aligner`)."""
+
+    #: The record a prefix aligner solved and each run's ``(counts, values, pims)`` (:meth:`prefix_aligner`).
+    _warm = None
+    #: Where ``_align`` keeps each run's solution while a prefix aligner solves its record.
+    _kept = None
+
+    def prefix_aligner(self, imu, site, aiding=None, init=None):
+        """A copy, without the marginal covariances, that aligns prefixes of the record ``imu`` from its solution.
+
+        The copy solves the whole record once (``imu``, ``site``, ``aiding`` and ``init`` as for ``align``) and keeps
+        each run's keyframe values and preintegrated intervals; aligning a prefix of that record (the same first
+        samples of the same runs, the same aiding up to the prefix's end) then starts Levenberg-Marquardt from those
+        values and reuses the intervals the prefix shares, in place of the coarse stage (or ``init``) and a new
+        preintegration. The prefix's graph is the same as a cold start's; only the start differs, so the solution is
+        the same to the solver's tolerance (tested). Any other record is aligned as by ``align``. What the runner's
+        settling of a smoother uses (:func:`fusionbench.bench.runner._prefix_settling`).
+
+        Returns
+        -------
+        FactorGraphAligner
+        """
+        lean = self.estimate_only()
+        lean._warm, lean._kept = None, []
+        lean.align(imu, site, init=init, aiding=aiding)
+        lean._warm, lean._kept = (imu, lean._kept), None
+        return lean
+
+    def _warm_runs(self, imu):
+        """The kept solutions, one per run, when ``imu`` is a prefix of the record they solved; else None."""
+        if self._warm is None:
+            return None
+        whole, runs = self._warm
+        n = imu.t.size
+        if (imu.kind != whole.kind or imu.runs > len(runs) or n > whole.t.size
+                or not np.array_equal(imu.t, whole.t[:n]) or not np.array_equal(imu.gyro, whole.gyro[:imu.runs, :n])
+                or not np.array_equal(imu.accel, whole.accel[:imu.runs, :n])):
+            return None
+        return runs
+
+    @staticmethod
+    def _warm_start(kept, counts, seg):
+        """``(C_kf, values, pims)`` for :meth:`_solve` on a prefix with keyframe ``counts`` (K,) and bias segments
+        ``seg``: the kept solution's first K keyframes and bias keys, and its intervals when the prefix's are the
+        same ones (else None: preintegrated again)."""
+        counts_all, values_all, pims_all = kept
+        K = counts.size
+        values = gtsam.Values()
+        for k in range(K):
+            values.insert(X(k), values_all.atPose3(X(k)))
+            values.insert(V(k), values_all.atVector(V(k)))
+        for j in range(int(seg.max()) + 1):
+            values.insert(B(j), values_all.atConstantBias(B(j)))
+        C_kf = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
+        same = K <= counts_all.size and np.array_equal(counts, counts_all[:K])
+        return C_kf, values, (list(pims_all[:K - 1]) if same else None)
 
     def _optimize(self, graph, values):
         lm = gtsam.LevenbergMarquardtParams()

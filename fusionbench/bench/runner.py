@@ -241,7 +241,8 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
     end backwards until every run has left the band (or the shortest prefix the method accepts is reached).
     Only runs ``first_run + i < PREFIX_RUNS`` are measured (the same runs whatever the batching); the others
     get NaN. A method with ``estimate_only()`` aligns the prefixes with that copy (the same attitudes without the
-    uncertainty figures: gtsam's marginals).
+    uncertainty figures: gtsam's marginals); one with ``prefix_aligner(imu, site, aiding, init)`` with the copy that
+    returns, which solves the whole record once and starts each prefix from that solution (the graphs).
 
     Returns ``(settle (R,) s, settled (R,) bool)``; ``settled`` (inside the band at the end) for every run."""
     band = scn.settling_band_arcmin * units.ARCMIN
@@ -266,6 +267,8 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
         part = IMUData(data.t[:n], data.gyro[:, :n], data.accel[:, :n], data.kind)
         if part.duration < getattr(method, "min_duration_s", 0.0):
             break
+        if k == ends[0] and callable(getattr(method, "prefix_aligner", None)):  # prefixes needed: solve the record
+            method = method.prefix_aligner(data, scn.site, aiding, init)
         res = call_align(method, part, scn.site, None if aiding is None else aiding.window(-np.inf, t_inc[k]),
                          None if init is None else init)
         C_true = traj.truth([t_inc[k]]).C_bn

@@ -1,0 +1,102 @@
+"""The graphs' prefix aligner (what the runner's settling of a smoother uses): each prefix of the record it solved
+starts from that solution and lands on the cold batch solution of the same prefix, to the solver's tolerance."""
+
+import numpy as np
+import pytest
+
+from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner
+from baselines.graph_adaptive import AdaptiveFactorGraphAligner
+from fusionbench.bench import runner
+from fusionbench.methods.aligner import Site
+from fusionbench.simulation import attitude, trajectory as tj
+from fusionbench.simulation.imu import PRESETS, simulate
+from fusionbench.simulation.imudata import IMUData
+
+D = np.pi / 180
+LAT = 34 * D
+DT = 0.02
+
+
+def _record(amp_deg, seed, duration=240.0, runs=2):
+    """Seed 000's navigation-grade IMU at 50 Hz on a fixed or swaying base at 34 N, heading 30 deg."""
+    sway = tj.EulerSway(np.radians([0.0, 0.0, -30.0]), np.radians(amp_deg), (0.5, 0.3, 0.2))
+    tr = tj.Trajectory(LAT, 0.3, 50.0, sway, duration=duration)
+    return tr, simulate(tr, PRESETS["navigation"], DT, runs=runs, seed=seed), Site(LAT, 0.3, 50.0)
+
+
+def _prefix(data, seconds):
+    n = int(round(seconds / data.dt))
+    return IMUData(data.t[:n], data.gyro[:, :n], data.accel[:, :n], data.kind)
+
+
+def _arcmin(C_a, C_b):
+    return np.abs(attitude.misalignment(C_a, C_b)).max(axis=-1) / D * 60.0
+
+
+class _NoCoarse:
+    """A coarse stage that fails the test if the prefix aligner falls back to it."""
+
+    min_duration_s = 0.0
+
+    def align(self, *args, **kwargs):
+        raise AssertionError("a prefix of the solved record went through the coarse stage")
+
+
+@pytest.mark.parametrize("cls, amp", [(FactorGraphAligner, (0.0, 0.0, 0.0)), (RobustFactorGraphAligner, (5, 7, 9)),
+                                      (AdaptiveFactorGraphAligner, (0.0, 0.0, 0.0))])
+def test_a_prefix_starts_from_the_record_and_lands_on_the_cold_solution(cls, amp):
+    # gtsam-adaptive does not offer it to the runner (its cost is the re-weighting), but the mechanism holds for it
+    _, data, site = _record(amp, seed=4)
+    cold = cls(imu="navigation").estimate_only()
+    warm = FactorGraphAligner.prefix_aligner(cls(imu="navigation"), data, site)
+    assert warm.marginals is False and cold.marginals is False
+    warm.coarse = _NoCoarse()
+    # 60.5 s: a prefix whose last keyframe interval is not one of the record's (preintegrated again)
+    for seconds in ((200.0, 60.5) if cls is AdaptiveFactorGraphAligner else (215.0, 125.0, 60.5)):
+        part = _prefix(data, seconds)
+        a, b = cold.align(part, site), warm.align(part, site)
+        assert np.array_equal(a.t, b.t)
+        # the same optimum of the same graph, from another start: LM stops within 1e-10 of the cost
+        assert _arcmin(a.C_bn[:, -1], b.C_bn[:, -1]).max() < 0.01
+        assert _arcmin(a.C_bn, b.C_bn).max() < 0.01  # every keyframe of the prefix, not only its end
+
+
+def test_the_adaptive_graph_leaves_its_prefixes_to_the_runner():
+    assert AdaptiveFactorGraphAligner.prefix_aligner is None
+    assert callable(RobustFactorGraphAligner(imu="navigation").prefix_aligner)
+
+
+def test_any_other_record_is_aligned_cold():
+    _, data, site = _record((0.0, 0.0, 0.0), seed=4)
+    _, other, _ = _record((0.0, 0.0, 0.0), seed=5)
+    warm = FactorGraphAligner(imu="navigation").prefix_aligner(data, site)
+    assert warm._warm_runs(_prefix(other, 120.0)) is None  # the same length, other samples
+    assert warm._warm_runs(IMUData(data.t, data.gyro[::-1], data.accel[::-1], data.kind)) is None  # runs swapped
+    res = warm.align(_prefix(other, 120.0), site)
+    ref = FactorGraphAligner(imu="navigation").estimate_only().align(_prefix(other, 120.0), site)
+    assert _arcmin(res.C_bn, ref.C_bn).max() < 1e-6  # the cold path itself
+
+
+def test_the_runner_reads_the_same_settling_with_and_without_the_prefix_aligner():
+    tr, data, site = _record((5, 7, 9), seed=6, duration=200.0)
+    scn = type("Scn", (), {"settling_band_arcmin": 6.0, "site": site})()
+    limit = np.zeros(1)
+
+    class Cold:  # the aligner as the runner saw it before: estimate_only, no prefix_aligner
+        def __init__(self):
+            self.inner = FactorGraphAligner(imu="navigation")
+            self.min_duration_s = self.inner.min_duration_s
+
+        def align(self, *args, **kwargs):
+            return self.inner.estimate_only().align(*args, **kwargs)
+
+    full = FactorGraphAligner(imu="navigation").estimate_only().align(data, site)
+    phi_end = attitude.misalignment(full.C_bn[:, -1], tr.truth([full.t[-1]]).C_bn[0])[:, 2]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(runner, "scenario_limits", lambda scn, traj, t, C: np.zeros((len(t), 3)))
+        warm = runner._prefix_settling(FactorGraphAligner(imu="navigation"), data, None, None, tr, scn, phi_end,
+                                       limit[0])
+        cold = runner._prefix_settling(Cold(), data, None, None, tr, scn, phi_end, limit[0])
+    assert np.array_equal(warm[0], cold[0]) and np.array_equal(warm[1], cold[1])
+    # a band of 6 arcmin about zero (the limit set to zero): settled after several prefix steps, both runs
+    assert np.all(warm[0] >= 50.0) and np.all(warm[1])
