@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 import gtsam
-from gtsam.symbol_shorthand import B, V, X
+from gtsam.symbol_shorthand import B, X
 
 from fusionbench.simulation.attitude import dcm_to_rotvec, orthonormalize, rotvec_to_dcm, skew
 from fusionbench.simulation.strapdown import coning_sculling, rodrigues
@@ -179,16 +179,13 @@ def _offsets(keys):
 class Posterior:
     """The Gaussian posterior of a keyframe graph linearised at its solution.
 
-    The graph is eliminated by QR in the order ``X(0), V(0), X(1), ..., V(K-1)`` and then the bias
-    keys: a Bayes net ``p(B) prod p(x_f | parents)`` of unit-noise conditionals
-    ``R x_f + S x_P = d + e``. Backwards, first over the bias keys (their joint covariance
-    ``S_bb``), then, with the biases known, ``Sigma_fP = -A Sigma_PP`` and
-    ``Sigma_ff = R^-1 R^-T + A Sigma_PP A^T`` (``A = R^-1 S``; each parent set is a clique whose
-    covariances are already known) together with the sensitivity to the biases ``M_f = -A M_P``.
-    The covariance of keys a, b is then ``Sigma_ab + M_a S_bb M_b^T`` (with the bias priors) or
-    ``Sigma_ab`` (biases known). Linear in K; ``gtsam.Marginals`` factors by Cholesky, which fails
-    on these nearly singular graphs. Covariances are in gtsam's tangent spaces (Pose3: rotation then
-    translation, body frame, ``R = R_hat Exp(delta)``).
+    The graph is eliminated by QR in gtsam's COLAMD order: a Bayes net ``prod p(x_f | parents)`` of
+    unit-noise conditionals ``R x_f + S x_P = d + e``. Backwards, each parent set is a clique whose covariances are
+    already known, and ``Sigma_fP = -A Sigma_PP``, ``Sigma_ff = R^-1 R^-T + A Sigma_PP A^T`` (``A = R^-1 S``). With
+    the biases known the same recursion runs on the graph with a constrained prior on every bias key (zero
+    covariance there). Linear in K; ``gtsam.Marginals`` factors by Cholesky, which fails on these nearly singular
+    graphs. Covariances are in gtsam's tangent spaces (Pose3: rotation then translation, body frame,
+    ``R = R_hat Exp(delta)``). The elimination order changes the cost only (docs/methods/gtsam.md, "Marginals").
 
     Parameters
     ----------
@@ -197,7 +194,7 @@ class Posterior:
     K : int
         Number of keyframes (keys ``X(k)``, ``V(k)``).
     bias_keys : sequence of int
-        The bias keys, in time order.
+        The bias keys.
 
     Raises
     ------
@@ -207,19 +204,15 @@ class Posterior:
 
     def __init__(self, graph, values, K, bias_keys):
         self.lin = graph.linearize(values)
-        order = gtsam.Ordering()
-        for k in range(K):
-            order.push_back(X(k))
-            order.push_back(V(k))
-        for b in bias_keys:
-            order.push_back(b)
-        net = self.lin.eliminateSequential(order, gtsam.EliminateQR)
-        nb = len(bias_keys)
         self.bias_keys = list(bias_keys)
-        sel = {b: np.zeros((6, 6 * nb)) for b in bias_keys}
-        for j, b in enumerate(bias_keys):
-            sel[b][:, 6 * j:6 * j + 6] = np.eye(6)
-        cov, sens, cov_b = {}, dict(sel), {}
+        self._cov = self._covariances(self.lin)
+        self._cov_known = None  # with the biases known: computed when asked
+
+    @classmethod
+    def _covariances(cls, lin):
+        """The covariances of every conditional's clique of the linear graph ``lin``: ``{(a, b): block}``."""
+        net = lin.eliminateSequential(gtsam.Ordering.ColamdGaussianFactorGraph(lin), gtsam.EliminateQR)
+        cov = {}
         for i in range(net.size() - 1, -1, -1):
             c = net.at(i)
             keys = list(c.keys())
@@ -227,32 +220,34 @@ class Posterior:
             # R is upper triangular, 3x3 or 6x6: scipy's solve_triangular costs milliseconds per call when
             # its threaded BLAS competes for the cores, numpy's inverse 0.03 ms
             R_inv = np.linalg.inv(c.R())
-            A = R_inv @ c.S() if parents else None
             model = c.get_model()
             # the noise of R x_f + S x_P = d: unit, or the sigmas of a diagonal model left on it (by a
             # constrained factor); then cov(x_f | x_P) = R^-1 diag(sigma^2) R^-T
             Ri = R_inv if model is None else R_inv * model.sigmas()[None, :]
-            if f in sel:  # a bias key: joint covariance of the biases
-                if parents:
-                    self._condition(cov_b, f, parents, A, Ri, parents)
-                else:
-                    cov_b[f, f] = Ri @ Ri.T
-                continue
-            self._condition(cov, f, parents, A, Ri, [p for p in parents if p not in sel])
-            sens[f] = -A @ np.vstack([sens[p] for p in parents])
-        self._cov, self._sens = cov, sens
-        self.S_bb = self._assemble(cov_b, self.bias_keys) if nb else np.zeros((0, 0))
+            if parents:
+                cls._condition(cov, f, parents, R_inv @ c.S(), Ri)
+            else:
+                cov[f, f] = Ri @ Ri.T
+        return cov
+
+    def _known(self):
+        """The covariances with every bias known (a constrained zero-mean prior on each bias key)."""
+        if self._cov_known is None:
+            lin = self.lin.clone()
+            for b in self.bias_keys:
+                lin.add(gtsam.JacobianFactor(b, np.eye(6), np.zeros(6), gtsam.noiseModel.Constrained.All(6)))
+            self._cov_known = self._covariances(lin)
+        return self._cov_known
 
     @classmethod
-    def _condition(cls, cov, f, parents, A, Ri, kept):
+    def _condition(cls, cov, f, parents, A, Ri):
         """The covariances of a frontal key ``f`` given its ``parents`` (whose joint covariance ``cov`` holds):
-        ``Sigma_ff = Ri Ri^T + A Sigma_PP A^T`` and ``Sigma_fp = -A Sigma_Pp`` for the parents ``kept``."""
+        ``Sigma_ff = Ri Ri^T + A Sigma_PP A^T`` and ``Sigma_fp = -A Sigma_Pp``."""
         cross = -A @ cls._assemble(cov, parents)
         cov[f, f] = Ri @ Ri.T - cross @ A.T
         off = _offsets(parents)
         for j, p in enumerate(parents):
-            if p in kept:
-                cov[f, p] = cross[:, off[j]:off[j + 1]]
+            cov[f, p] = cross[:, off[j]:off[j + 1]]
 
     @staticmethod
     def _assemble(cov, keys):
@@ -264,7 +259,7 @@ class Posterior:
                     blk = cov[ka, kb]
                 elif (kb, ka) in cov:
                     blk = cov[kb, ka].T
-                else:  # a bias key in the noise-only covariance, or keys never in one clique
+                else:  # keys never in one clique
                     continue
                 P[off[a]:off[a + 1], off[b]:off[b + 1]] = blk
         return P
@@ -272,11 +267,7 @@ class Posterior:
     def cov(self, keys, bias=True):
         """Joint covariance of ``keys`` (which must lie in one clique: a factor's keys do), with the
         bias priors (``bias=True``) or with the biases known."""
-        P = self._assemble(self._cov, keys)
-        if bias and self.bias_keys:
-            M = np.vstack([self._sens[k] for k in keys])
-            P = P + M @ self.S_bb @ M.T
-        return P
+        return self._assemble(self._cov if bias else self._known(), keys)
 
     def attitude_sigmas(self, C_kf):
         """Marginal misalignment sigmas, rad, ENU, each (K, 3): with the bias priors, and with the biases
@@ -284,12 +275,11 @@ class Posterior:
         tangent), so its covariance is ``C_bn S C_bn^T``."""
         K = C_kf.shape[0]
         full, noise = np.empty((K, 3)), np.empty((K, 3))
+        known = self._known()
         for k in range(K):
             C = C_kf[k]
-            S_noise = self._cov[X(k), X(k)][:3, :3]
-            M = self._sens[X(k)][:3]
-            noise[k] = np.sqrt(np.clip(np.diag(C @ S_noise @ C.T), 0.0, None))
-            full[k] = np.sqrt(np.clip(np.diag(C @ (S_noise + M @ self.S_bb @ M.T) @ C.T), 0.0, None))
+            full[k] = np.sqrt(np.clip(np.diag(C @ self._cov[X(k), X(k)][:3, :3] @ C.T), 0.0, None))
+            noise[k] = np.sqrt(np.clip(np.diag(C @ known[X(k), X(k)][:3, :3] @ C.T), 0.0, None))
         return full, noise
 
 
