@@ -192,9 +192,10 @@ class Posterior:
     graph : gtsam.NonlinearFactorGraph
     values : gtsam.Values
     K : int
-        Number of keyframes (keys ``X(k)``, ``V(k)``).
+        Number of keyframes (keys ``X(k)``, ``V(k)``); not needed by the COLAMD elimination, kept in the signature for
+        its callers.
     bias_keys : sequence of int
-        The bias keys.
+        The bias keys (held known for the covariances with the biases known).
 
     Raises
     ------

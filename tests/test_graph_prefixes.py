@@ -92,11 +92,20 @@ def test_the_runner_reads_the_same_settling_with_and_without_the_prefix_aligner(
 
     full = FactorGraphAligner(imu="navigation").estimate_only().align(data, site)
     phi_end = attitude.misalignment(full.C_bn[:, -1], tr.truth([full.t[-1]]).C_bn[0])[:, 2]
+    solved = []  # the records the runner had a prefix aligner solve: one, however many prefixes it reads
+    original = FactorGraphAligner.prefix_aligner
+
+    def spy(self, imu, *args):
+        solved.append(imu.runs)
+        return original(self, imu, *args)
+
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(runner, "scenario_limits", lambda scn, traj, t, C: np.zeros((len(t), 3)))
+        mp.setattr(FactorGraphAligner, "prefix_aligner", spy)
         warm = runner._prefix_settling(FactorGraphAligner(imu="navigation"), data, None, None, tr, scn, phi_end,
                                        limit[0])
         cold = runner._prefix_settling(Cold(), data, None, None, tr, scn, phi_end, limit[0])
+    assert solved == [2]
     assert np.array_equal(warm[0], cold[0]) and np.array_equal(warm[1], cold[1])
     # a band of 6 arcmin about zero (the limit set to zero): settled after several prefix steps, both runs
     assert np.all(warm[0] >= 50.0) and np.all(warm[1])
