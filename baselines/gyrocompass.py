@@ -140,7 +140,7 @@ class PIDLoops:
     def frame_turned(self, az):
         """The computed frame was turned by the azimuth ``az`` (R,) rad: shift the level integrators by the known
         change of the earth-rate terms (eq. 19), so the level channels stay steady."""
-        self.J[:, 0] -= self.wN * np.sin(az)
+        self.J[:, 0] += self.wN * np.sin(az)
         self.J[:, 1] += self.wN * (1.0 - np.cos(az))
 
 
