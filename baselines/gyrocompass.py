@@ -22,8 +22,8 @@ stage with equal decay times); the east tilt then follows the gyro noise with th
 
 Stages (all times configurable):
 
-1. **level** (until the first compass stage): fast third-order level loops in both channels, no
-   azimuth loop.
+1. **level** (until the first compass stage): third-order level loops in both channels, no azimuth loop; fast
+   (``level_td_s``) from the start, narrower from each of ``level_stages`` on.
    The compass loop cannot start from any heading: at 180 deg the compass effect sin(az) W cos L
    vanishes and its derivative has the wrong sign, so 180 deg is its unstable equilibrium (a
    PSINS-style schedule from exactly 180 deg under seed 000's (Zhou 2011, ADRC gyrocompass) sway did not settle in 600
@@ -31,13 +31,12 @@ Stages (all times configurable):
    (eq. 19 of seed 000). From ``fit_from_s`` the least-squares form of eq. 19
    (:class:`fusionbench.methods.compass.AzimuthFit`) reads them, and at ``shot_s`` the attitude is turned
    once by the azimuth found; the level integrators are shifted by the known change of the
-   earth-rate terms. Turning the computed frame flips its level errors, so the fast level loops
-   run on for a while before the compass loop starts: the compass loop reads any level transient
-   as an azimuth error (its gain from tilt to azimuth is about sigma / (W cos L), a thousand), and
-   would throw the azimuth degrees off.
-2. **compass stages** (``compass_stages``, from ``shot_s`` on): the north channel becomes the
-   compass loop, first fast to pull in the residual of the shot, then slower and slower so that the
-   narrow bands filter the sway, the velocity noise and the gyro noise.
+   earth-rate terms, which leaves the levels steady. The compass loop reads the east tilt at its closing as an
+   azimuth error (hundreds of arcmin of azimuth per arcmin of tilt: the azimuth is seen only through the tilt's
+   drift), so the narrower level loops quiet the tilt the reference noise gives the fast ones before it closes.
+2. **compass stages** (``compass_stages``, from the shot on): the north channel becomes the compass loop, its
+   azimuth gain rising from zero over ``closing_ramp_s`` (a soft closing), first fast to pull in the residual of the
+   shot, then slower and slower so that the narrow bands filter the sway, the velocity noise and the gyro noise.
 
 The reported attitude is the loop's own (the classical method); its limits are those of any
 stationary alignment.
@@ -159,13 +158,17 @@ class PIDGyrocompass(AlignerBase):
     fit_from_s, shot_s : float
         Start of the azimuth fit and time of the one-shot azimuth correction, s.
     level_td_s : float
-        Level-loop decay time of the level stage (until the first compass stage), s.
+        Level-loop decay time of the level stage (until the first of ``level_stages``), s.
+    level_stages : sequence of (start_s, level_td_s)
+        Before the first compass stage: from each start time (s) on, the level loops' decay time (s). Narrower loops
+        quiet the east tilt the compass loop would read as azimuth at its closing.
     compass_stages : sequence of (start_s, level_td_s, azimuth_td_s)
         The compass stages: from each start time (s, after the shot) on, the level decay time (s; the east
         channel's level loop and the compass loop's level pair) and the azimuth decay time (s; the compass
-        loop's azimuth pair). Narrower loops later filter more noise; switching keeps the loop states. The
-        defaults' azimuth pairs (130, 333, 800 s) leave the azimuth noise of PSINS's double pairs at 100, 250
-        and 600 s.
+        loop's azimuth pair). Narrower loops later filter more noise; switching keeps the loop states.
+    closing_ramp_s : float
+        The compass loop's azimuth gain rises linearly from zero at its closing (the first compass stage) to its
+        full value this long after, s; 0: at once.
     imu : str, path or IMUSpec, optional
         The IMU (:func:`fusionbench.simulation.imu.load_spec`), used only to refuse when its gyro bias hides the earth
         rate (:func:`fusionbench.methods.claims.check_azimuth_observable`); None: not checked.
@@ -183,21 +186,37 @@ class PIDGyrocompass(AlignerBase):
                    "from any heading")
 
     def __init__(self, step_s=0.1, xi=np.sqrt(2) / 2, fit_from_s=15.0, shot_s=70.0, level_td_s=20.0,
-                 compass_stages=((90.0, 50.0, 130.0), (160.0, 50.0, 333.0), (260.0, 50.0, 800.0)), imu=None):
+                 level_stages=((30.0, 60.0),),
+                 compass_stages=((70.0, 60.0, 190.0), (120.0, 60.0, 500.0), (260.0, 60.0, 800.0)),
+                 closing_ramp_s=30.0, imu=None):
         self.spec = None if imu is None else load_spec(imu)
         self.step_s, self.xi = float(step_s), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
+        self.level_stages = tuple(tuple(float(x) for x in st) for st in level_stages)
         self.compass_stages = tuple(tuple(float(x) for x in st) for st in compass_stages)
+        self.closing_ramp_s = float(closing_ramp_s)
         self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
-        starts = [st[0] for st in self.compass_stages]
-        if not self.compass_stages or starts != sorted(starts):
-            raise ValueError(f"compass_stages: expected (start_s, level_td_s, azimuth_td_s) in increasing start order, "
-                             f"found {compass_stages}")
+        if any(len(st) != 2 for st in self.level_stages):
+            raise ValueError(f"level_stages: expected (start_s, level_td_s) pairs, found {level_stages}")
+        if not self.compass_stages or any(len(st) != 3 for st in self.compass_stages):
+            raise ValueError(f"compass_stages: expected (start_s, level_td_s, azimuth_td_s) triples, found "
+                             f"{compass_stages}")
+        starts = [st[0] for st in self.level_stages + self.compass_stages]
+        if starts != sorted(starts):
+            raise ValueError(f"level_stages, compass_stages: expected start times in increasing order, the level "
+                             f"stages before the compass stages, found {starts}")
+        if self.closing_ramp_s < 0:
+            raise ValueError(f"closing_ramp_s: expected a time >= 0 s, found {closing_ramp_s}")
 
     def events(self, init_given):
-        """Stages for the figures (:mod:`fusionbench.reports.figures`), s: the azimuth shot (the attitude turned by the
-        fitted azimuth) and the closing of the compass loop."""
-        return [(float(self.shot_s), "azimuth shot"), (self.compass_stages[0][0], "compass loop closed")]
+        """Stages for the figures (:mod:`fusionbench.reports.figures`), s: the narrower level loops, the azimuth shot
+        (the attitude turned by the fitted azimuth) and the closing of the compass loop (one event when they
+        coincide)."""
+        shot, close = float(self.shot_s), max(self.compass_stages[0][0], float(self.shot_s))
+        ev = [(t, f"level loops narrowed ({td:g} s)") for t, td in self.level_stages]
+        if close == shot:
+            return ev + [(shot, "azimuth shot, compass loop closed")]
+        return ev + [(shot, "azimuth shot"), (close, "compass loop closed")]
 
     def _align(self, imu, site: Site, aiding, init) -> AlignmentResult:
         """Align R recordings on a stationary or swaying base (body RFU, ENU); see the module docstring. Without
@@ -211,16 +230,21 @@ class PIDGyrocompass(AlignerBase):
         fit = AzimuthFit(R, h, site.lat, g)
         fit_from = int(round(self.fit_from_s / h))
         shot_step = max(int(round(self.shot_s / h)), fit_from + 4)
-        stage_steps = [max(shot_step + 1, int(round(st[0] / h))) for st in self.compass_stages]
+        # per stage (0: levelling, then the level stages, then the compass stages): the level gains and, in the
+        # compass stages, the compass gains; the compass stages start after the shot
+        stage_steps = [int(round(st[0] / h)) for st in self.level_stages]
+        stage_steps += [max(shot_step + 1, int(round(st[0] / h))) for st in self.compass_stages]
+        close_step = stage_steps[len(self.level_stages)]
         loops = PIDLoops(R, h, radius, wN)
         hist_t = np.empty(loop.records)
         hist_t[:loop.steps] = loop.t[loop.m - 1::loop.m][:loop.steps]  # the ends of the steps
         hist_C = np.empty((R, loop.records, 3, 3))
-        # per stage (0: levelling): the level gains and, from the first compass stage, the compass gains
-        gains = [level_gains(self.level_td_s, self.xi, ws2, g) + (0.0,) * 4]
+        gains = [level_gains(td, self.xi, ws2, g) + (0.0,) * 4 for td in
+                 [self.level_td_s] + [st[1] for st in self.level_stages]]
         gains += [level_gains(lv, self.xi, ws2, g) + compass_gains(az, self.xi, ws2, g, level_td=lv)
                   for _, lv, az in self.compass_stages]
-        az_shot = run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C)
+        closing = (close_step, self.closing_ramp_s / h)  # the compass loop's first step; its gain's ramp, steps
+        az_shot = run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, closing, gains, hist_C)
         t_last = loop.finish()  # the samples after the last control step: the result ends at the last sample
         if t_last is not None:
             hist_t[-1], hist_C[:, -1] = t_last, loop.sd.state.C_bn

@@ -20,7 +20,8 @@ from fusionbench.methods.compass_compiled import command_step, fit_step, loop_ar
 
 
 @numba.njit(cache=True)
-def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radius, J, x, damp, omega_c, hist_C):
+def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, close_step, ramp_steps, gains, radius, J, x, damp,
+              omega_c, hist_C):
     """Control steps ``j0, j0 + 1, ...`` of :meth:`baselines.gyrocompass.PIDGyrocompass._align`'s loop, all runs,
     until the shot or the last step.
 
@@ -36,10 +37,15 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
     fit_from, shot_step : int
         The steps of the fit (``fit_from`` to ``shot_step``) and of the shot.
     stage_steps : ndarray of int
-        First step of each compass stage.
+        First step of each stage after the first (the level stages, then the compass stages).
+    close_step : int
+        First step of the compass loop (of the first compass stage).
+    ramp_steps : float
+        The compass loop's azimuth gain rises linearly to its full value over this many steps from ``close_step``
+        (the first compass step has 1 / ramp_steps of it); 0: at once.
     gains : ndarray, shape (stages + 1, 7)
-        Per stage (0: the level stage): the level gains k1, k2, k3 and the compass gains c1, c2, c3, c4 (unused in
-        stage 0).
+        Per stage (0: the first level stage): the level gains k1, k2, k3 and the compass gains c1, c2, c3, c4
+        (unused before ``close_step``).
     radius : float
         Earth radius at the site, m.
     J, x, damp, omega_c : ndarray
@@ -71,12 +77,13 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
         while stage < stage_steps.size and stage_steps[stage] <= j:
             stage += 1
         k1, k2, k3, c1, c2, c3, c4 = gains[stage]
+        ramp = min(1.0, (j - close_step + 1) / ramp_steps) if ramp_steps > 0 else 1.0
         for r in range(runs):  # the oracle's step (tests/oracles/pid_gyrocompass.py)
             vE, vN = dv[r, 0], dv[r, 1]
             J[r, 1] += k3 * vE * h
             w_cN = (1 + k2) * vE / radius + J[r, 1]
             dE = k1 * vE * h
-            if stage == 0:
+            if j < close_step:
                 J[r, 0] += k3 * vN * h
                 w_cE = -(1 + k2) * vN / radius - J[r, 0]
                 w_cU = 0.0
@@ -84,7 +91,7 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
             else:
                 x[r] += (vN - c4 * x[r]) * h
                 w_cE = -(1 + c2) * vN / radius
-                w_cU = c3 / wN * x[r]
+                w_cU = ramp * c3 / wN * x[r]
                 dN = c1 * vN * h
             damp[r, 0] += dE
             damp[r, 1] += dN
@@ -95,7 +102,7 @@ def pid_steps(arrays, j0, resume, fit_from, shot_step, stage_steps, gains, radiu
     return steps
 
 
-def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C):
+def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, closing, gains, hist_C):
     """The PID loop of :meth:`baselines.gyrocompass.PIDGyrocompass._align`, compiled.
 
     Parameters
@@ -107,9 +114,12 @@ def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist
     fit_from, shot_step : int
         First step of the fit; step of the shot.
     stage_steps : list of int
-        First step of each compass stage.
+        First step of each stage after the first (the level stages, then the compass stages).
+    closing : (int, float)
+        The compass loop's first step and the length of its gain's ramp, steps (:func:`pid_steps`'s ``close_step``
+        and ``ramp_steps``).
     gains : ndarray, shape (stages + 1, 7)
-        Per stage: k1, k2, k3 of the level loops and c1..c4 of the compass loop (zeros in stage 0).
+        Per stage: k1, k2, k3 of the level loops and c1..c4 of the compass loop (zeros in the level stages).
     hist_C : ndarray, shape (R, records, 3, 3)
         The attitude history; the first ``loop.steps`` entries are written.
 
@@ -119,7 +129,8 @@ def run_compiled(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist
         The azimuth of the shot, rad (NaN if the record ends before it).
     """
     arrays = loop_arrays(loop, fit)
-    state = (fit_from, shot_step, np.asarray(stage_steps, dtype=np.int64), np.asarray(gains, dtype=float),
+    state = (fit_from, shot_step, np.asarray(stage_steps, dtype=np.int64), int(closing[0]), float(closing[1]),
+             np.asarray(gains, dtype=float),
              float(loops.radius), loops.J, loops.x, loops.damp, loops.omega_c, hist_C)
     az_shot = np.full(loop.R, np.nan)
     j = pid_steps(arrays, 0, False, *state)

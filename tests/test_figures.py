@@ -104,8 +104,11 @@ def test_a_filter_with_its_own_coarse_stage_marks_the_hand_over_only_when_it_run
     assert fev.method_events({"kf": kf, "eso-td": eso}, init_given=False)[0] == \
         fev.Event(kf.coarse_s, None, "coarse -> fine hand-over", ("kf", "eso-td"))
     assert fev.method_events({"kf": kf, "eso-td": eso}, init_given=True) == []
-    pid = scn.method("pid")
-    assert [e.t0_s for e in fev.method_events({"pid": pid}, True)] == [pid.shot_s, pid.compass_stages[0][0]]
+    pid = scn.method("pid")  # the narrower level loops (30 s), then the shot and the compass loop's closing at 70 s
+    assert [(e.t0_s, e.label) for e in fev.method_events({"pid": pid}, True)] == \
+        [(30.0, "level loops narrowed (60 s)"), (70.0, "azimuth shot, compass loop closed")]
+    later = scn.method("pid").__class__(compass_stages=((90.0, 60.0, 190.0),))
+    assert [e.t0_s for e in fev.method_events({"pid": later}, True)] == [30.0, 70.0, 90.0]
 
 
 def test_no_limit_or_band_for_navigation_and_hours_on_the_axis(tmp_path):

@@ -12,12 +12,13 @@ from __future__ import annotations
 import numpy as np
 
 
-def step(loops, vE, vN, level, compass=None):
+def step(loops, vE, vN, level, compass=None, ramp=1.0):
     """One control step of ``loops`` (:class:`baselines.gyrocompass.PIDLoops`) with the velocity errors ``vE``, ``vN``
     (R,) m/s.
 
     ``level`` = (k1, k2, k3) of :func:`baselines.gyrocompass.level_gains`; ``compass`` = (c1, c2, c3, c4) of
-    :func:`baselines.gyrocompass.compass_gains` makes the north channel the compass loop. Updates ``loops.omega_c``;
+    :func:`baselines.gyrocompass.compass_gains` makes the north channel the compass loop, its azimuth gain c3 times
+    ``ramp`` (the soft closing's fraction, 0 to 1). Updates ``loops.omega_c``;
     returns the velocity corrections ``dE``, ``dN`` (R,) m/s that the damping terms take off the strapdown's
     velocity."""
     h, radius = loops.h, loops.radius
@@ -36,14 +37,14 @@ def step(loops, vE, vN, level, compass=None):
         c1, c2, c3, c4 = compass
         loops.x += (vN - c4 * loops.x) * h
         w_cE = -(1 + c2) * vN / radius
-        w_cU = c3 / loops.wN * loops.x
+        w_cU = ramp * c3 / loops.wN * loops.x
         dN = c1 * vN * h
     loops.damp += np.stack([dE, dN], axis=-1)
     loops.omega_c = np.stack([w_cE, w_cN, w_cU], axis=-1)
     return dE, dN
 
 
-def run_numpy(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C):
+def run_numpy(loop, fit, loops, fit_from, shot_step, stage_steps, closing, gains, hist_C):
     """The arguments, effects and result of :func:`baselines.gyrocompass_compiled.run_compiled`: one control step
     at a time, NumPy over the runs."""
     az_shot = np.full(loop.R, np.nan)
@@ -53,7 +54,9 @@ def run_numpy(loop, fit, loops, fit_from, shot_step, stage_steps, gains, hist_C)
         if j == shot_step:
             az_shot = loops.shot(loop, fit)
         stage = int(np.searchsorted(stage_steps, j, side="right"))
-        dE, dN = step(loops, dv[:, 0], dv[:, 1], gains[stage][:3], None if stage == 0 else gains[stage][3:])
+        close_step, ramp_steps = closing
+        ramp = min(1.0, (j - close_step + 1) / ramp_steps) if ramp_steps > 0 else 1.0
+        dE, dN = step(loops, dv[:, 0], dv[:, 1], gains[stage][:3], None if j < close_step else gains[stage][3:], ramp)
         loop.sd.state.v_n[:, 0] -= dE
         loop.sd.state.v_n[:, 1] -= dN
         loop.omega_c = loops.omega_c
