@@ -87,6 +87,19 @@ def compass_gains(td, xi, ws2, g, level_td=None):
     return a3 - k4, w / ws2 - 1, a0 / g, k4
 
 
+def _stages(value, name, shape):
+    """``value`` as a tuple of tuples of finite floats, each of the ``shape`` named (as many numbers as its commas + 1),
+    or a one-line ValueError naming ``name``."""
+    width = shape.count(",") + 1
+    try:
+        stages = tuple(tuple(float(x) for x in st) for st in value)
+    except (TypeError, ValueError):
+        stages = None
+    if stages is None or any(len(st) != width or not np.all(np.isfinite(st)) for st in stages):
+        raise ValueError(f"{name}: expected a sequence of {shape}, found {value!r}")
+    return stages
+
+
 class PIDLoops:
     """The states of the PID gyrocompass's loops over R runs (the module docstring's names) and its azimuth shot.
 
@@ -192,21 +205,16 @@ class PIDGyrocompass(AlignerBase):
         self.spec = None if imu is None else load_spec(imu)
         self.step_s, self.xi = float(step_s), float(xi)
         self.fit_from_s, self.shot_s, self.level_td_s = fit_from_s, shot_s, level_td_s
-        self.level_stages = tuple(tuple(float(x) for x in st) for st in level_stages)
-        self.compass_stages = tuple(tuple(float(x) for x in st) for st in compass_stages)
-        self.closing_ramp_s = float(closing_ramp_s)
+        self.level_stages = _stages(level_stages, "level_stages", "(start_s, level_td_s)")
+        self.compass_stages = _stages(compass_stages, "compass_stages", "(start_s, level_td_s, azimuth_td_s)")
+        self.closing_ramp_s = float(closing_ramp_s)  # a number >= 0: checked with every option (AlignerBase)
         self.min_duration_s = float(shot_s) + 10.0  # the azimuth is only known after the shot
-        if any(len(st) != 2 for st in self.level_stages):
-            raise ValueError(f"level_stages: expected (start_s, level_td_s) pairs, found {level_stages}")
-        if not self.compass_stages or any(len(st) != 3 for st in self.compass_stages):
-            raise ValueError(f"compass_stages: expected (start_s, level_td_s, azimuth_td_s) triples, found "
-                             f"{compass_stages}")
+        if not self.compass_stages:
+            raise ValueError("compass_stages: expected at least one (start_s, level_td_s, azimuth_td_s), found none")
         starts = [st[0] for st in self.level_stages + self.compass_stages]
         if starts != sorted(starts):
             raise ValueError(f"level_stages, compass_stages: expected start times in increasing order, the level "
                              f"stages before the compass stages, found {starts}")
-        if self.closing_ramp_s < 0:
-            raise ValueError(f"closing_ramp_s: expected a time >= 0 s, found {closing_ramp_s}")
 
     def events(self, init_given):
         """Stages for the figures (:mod:`fusionbench.reports.figures`), s: the narrower level loops, the azimuth shot

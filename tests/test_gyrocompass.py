@@ -279,3 +279,17 @@ def test_from_any_start_seed_000s_case_settles_within_150_s_against_the_truth():
     out = run_alignment(scn, methods=["pid", "former"], runs=20, seed=0, n_jobs=1, progress=False)
     settle = {name: float(np.mean(out.outcomes[name].per_run["settle"])) for name in ("pid", "former")}
     assert settle["pid"] <= 150.0 and settle["former"] > 150.0
+
+
+@pytest.mark.parametrize("options, words", [
+    ({"level_stages": [[30.0, "x"]]}, "level_stages: expected a sequence of (start_s, level_td_s), found [[30.0, 'x']]"),
+    ({"level_stages": [[30.0]]}, "level_stages: expected a sequence of (start_s, level_td_s)"),
+    ({"compass_stages": [[70.0, 60.0]]}, "compass_stages: expected a sequence of (start_s, level_td_s, azimuth_td_s)"),
+    ({"compass_stages": []}, "compass_stages: expected at least one"),
+    ({"level_stages": [[80.0, 60.0]]}, "expected start times in increasing order"),
+    ({"closing_ramp_s": -1.0}, "closing_ramp_s: expected a number >= 0, found -1"),
+])
+def test_a_bad_schedule_is_refused_in_one_line_naming_the_option(options, words):
+    with pytest.raises(ValueError) as exc:
+        PIDGyrocompass(**options)
+    assert words in str(exc.value) and "\n" not in str(exc.value)
