@@ -131,7 +131,7 @@ class GraphBuilder:
                 continue
             w = 1.0 if huber is None else huber[g][:, None]
             var = self._tile_variance(g, data, pims, lin[0], imu_scale) / w
-            for k, f in tile_factors(data[g], np.sqrt(var), keys, lin):
+            for k, f in tile_factors(data[g], np.sqrt(var), keys, lin, at):
                 idx[g][k] = graph.size()
                 graph.add(f)
         free = np.ones(3, bool) if refs["pos"] is None else ~np.any(refs["pos"]["W"] > 0, axis=0)

@@ -226,7 +226,7 @@ def tile_error(d, R, t, v, b_acc):
     return e + t if d["position"] else e
 
 
-def tile_factors(d, sigma, keys, at):
+def tile_factors(d, sigma, keys, at, values=None):
     """The tile factors of the keyframes, each linearised at its keyframe's current values (a
     ``gtsam.LinearContainerFactor``: in C++; the caller relinearises when the attitude moved).
 
@@ -246,6 +246,10 @@ def tile_factors(d, sigma, keys, at):
     at : (sequence, ndarray, sequence)
         Linearisation point: the K poses (``gtsam.Pose3``), velocities (K, 3) m/s and biases
         (``gtsam.imuBias.ConstantBias``).
+    values : gtsam.Values, optional
+        The same point as ``at``, every key in one container (the solver's values): each factor copies its own keys
+        from it. Default: a container per factor built from ``at`` (three inserts a keyframe, the larger part of
+        the graph's construction).
 
     Returns
     -------
@@ -274,10 +278,12 @@ def tile_factors(d, sigma, keys, at):
         key_x, key_v, key_b = keys[k]
         noise = gtsam.noiseModel.Diagonal.Sigmas(sigma[k, a])
         jf = gtsam.JacobianFactor(key_x, H_x[k, a], key_v, H_v[k, a], key_b, H_b[k, a], -e0[k, a], noise)
-        lin = gtsam.Values()
-        lin.insert(key_x, poses[k])
-        lin.insert(key_v, np.asarray(v[k], dtype=float))
-        lin.insert(key_b, biases[k])
+        lin = values
+        if lin is None:
+            lin = gtsam.Values()
+            lin.insert(key_x, poses[k])
+            lin.insert(key_v, np.asarray(v[k], dtype=float))
+            lin.insert(key_b, biases[k])
         out.append((k, gtsam.LinearContainerFactor(jf, lin)))
     return out
 

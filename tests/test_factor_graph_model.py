@@ -135,6 +135,13 @@ def test_the_tile_factor_is_its_error_linearised_in_gtsams_tangent(position):
     moved.insert(keys[0][2], bias)
     e1 = error(pose.retract(dx), v, bias)[:2] / sigma[0, :2]
     assert f.error(moved) == pytest.approx(0.5 * e1 @ e1, rel=1e-3)
+    # its point read from the solver's whole container (other keyframes' keys beside its own): the same factor
+    whole = gtsam.Values(values)
+    whole.insert(X(4), pose.retract(-dx))
+    whole.insert(V(4), -v)
+    [(_, g)] = tile_factors(d, sigma, keys, ([pose], v[None], [bias]), whole)
+    assert g.error(moved) == f.error(moved) and g.error(values) == f.error(values)
+    assert np.array_equal(g.linearize(moved).jacobian()[1], f.linearize(moved).jacobian()[1])
 
 
 def test_a_perfect_imu_on_a_wobbling_vehicle_with_a_perfect_reference_is_aligned():
