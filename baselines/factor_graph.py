@@ -247,7 +247,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         bg, ba = np.empty((R, 3)), np.empty((R, 3))
         iters, passes, cost = np.zeros(R, int), np.zeros(R, int), np.empty(R)
         restarted = np.zeros(R, bool)
-        per_run = []
+        per_run, kept = [], []
         differenced = None
         if aiding is not None and aiding.has_position:  # heights not measured: no vertical velocity (a level drive)
             differenced = replace(aiding, position=np.where(np.isnan(aiding.position) & (np.arange(3) == 2), site.h,
@@ -285,8 +285,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
                 sol = again[:3] + (sol[3] + again[3], sol[4] + again[4]) + again[5:]
             sol, more = self._refine(problem, sol)
             per_run.append(more)
-            if self._kept is not None:  # a prefix aligner keeps the record's solution to start its prefixes from
-                self._kept.append((counts, sol[1], sol[8]))
+            if self._keeps:
+                kept.append((counts, sol[1], sol[8]))
             graph, values, C_kf, iters[r], passes[r] = sol[:5]
             cost[r] = graph.error(values)
             C_out[r] = C_kf
@@ -297,6 +297,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         extra = {"sigma_phi_noise": sig_noise, "gyro_bias": bg, "accel_bias": ba,
                  "iterations": iters, "passes": passes, "restarted": restarted, "graph_error": cost,
                  "step_s": self.step_s}
+        if self._keeps:  # prefixes of this record are to be aligned: keep its solution to start them from
+            self._solved = (imu, kept)
         for key in (per_run[0] if per_run else {}):
             stacked = np.stack([m[key] for m in per_run])
             extra[key] = stacked[0] if key in self._shared_extra else stacked

@@ -72,6 +72,7 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
     #: No prefix aligner: its cost on a prefix is the re-weighting (:meth:`_refine`), not the start, and solving the
     #: record once more first made its settling slower (0.95x, benchmarks/perf_prefixes.py --quick)
     prefix_aligner = None
+    keeping_solutions = None
 
     def __init__(self, adapt_window_s=10.0, adapt_iterations=6, adapt_tol=0.05, adapt_smooth=5, adapt_min_dof=10.0,
                  adapt_prior_dof=10.0, adapt_bounds=(1e-2, 1e4), imu="navigation", vref_sigma=0.01, **kw):

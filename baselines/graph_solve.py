@@ -7,6 +7,8 @@ The solver's tolerances and why QR: ``docs/methods/gtsam.md``.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 import gtsam
@@ -18,6 +20,20 @@ from .graph_aiding import tile_data
 from .graph_build import GraphBuilder
 
 
+def _prefix_runs(solved, imu):
+    """The solutions of ``solved = (record, runs)`` when ``imu`` is a prefix of that record (its first samples of
+    its first runs); else None."""
+    if solved is None:
+        return None
+    whole, runs = solved
+    n = imu.t.size
+    if (imu.kind != whole.kind or imu.runs > len(runs) or n > whole.t.size
+            or not np.array_equal(imu.t, whole.t[:n]) or not np.array_equal(imu.gyro, whole.gyro[:imu.runs, :n])
+            or not np.array_equal(imu.accel, whole.accel[:imu.runs, :n])):
+        return None
+    return runs
+
+
 class GraphSolver(GraphBuilder):
     """Solves the graph of one recording (:class:`GraphBuilder`) for
     :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``),
@@ -25,41 +41,55 @@ class GraphSolver(GraphBuilder):
 
     #: The record a prefix aligner solved and each run's ``(counts, values, pims)`` (:meth:`prefix_aligner`).
     _warm = None
-    #: Where ``_align`` keeps each run's solution while a prefix aligner solves its record.
-    _kept = None
+    #: Whether ``_align`` keeps the record and each run's solution in ``_solved`` (:meth:`keeping_solutions`).
+    _keeps = False
+    #: A keeper's last record and its runs' solutions, as ``_warm``.
+    _solved = None
+
+    def keeping_solutions(self):
+        """A copy that keeps each run's solution of the record it last aligned, so that :meth:`prefix_aligner` on
+        that record (or on its first runs) starts from it instead of solving the record again. What the runner
+        aligns a smoother's whole record with before it reads the settling off the prefixes
+        (:func:`fusionbench.bench.runner._align_batch`); it holds the record and each run's keyframe values and
+        preintegrated intervals (about 1 MB a run of 600 keyframes) until it is dropped.
+
+        Returns
+        -------
+        FactorGraphAligner
+        """
+        keeper = copy.copy(self)
+        keeper._keeps, keeper._solved = True, None
+        return keeper
 
     def prefix_aligner(self, imu, site, aiding=None, init=None):
         """A copy, without the marginal covariances, that aligns prefixes of the record ``imu`` from its solution.
 
-        The copy solves the whole record once (``imu``, ``site``, ``aiding`` and ``init`` as for ``align``) and keeps
-        each run's keyframe values and preintegrated intervals; aligning a prefix of that record (the same first
-        samples of the same runs, the same aiding up to the prefix's end) then starts Levenberg-Marquardt from those
-        values and reuses the intervals the prefix shares, in place of the coarse stage (or ``init``) and a new
-        preintegration. The prefix's graph is the same as a cold start's; only the start differs, so the solution is
-        the same to the solver's tolerance (tested). Any other record is aligned as by ``align``. What the runner's
-        settling of a smoother uses (:func:`fusionbench.bench.runner._prefix_settling`).
+        The copy starts from the solution of the whole record (``imu``, ``site``, ``aiding`` and ``init`` as for
+        ``align``): the one this aligner kept when it is a keeper (:meth:`keeping_solutions`) that last aligned
+        this record or one whose first runs it is, else one solved here. Aligning a prefix of that record (the same
+        first samples of the same runs, the same aiding up to the prefix's end) then starts Levenberg-Marquardt from
+        those values and reuses the intervals the prefix shares, in place of the coarse stage (or ``init``) and a
+        new preintegration. The prefix's graph is the same as a cold start's; only the start differs, so the
+        solution is the same to the solver's tolerance (tested). Any other record is aligned as by ``align``. What
+        the runner's settling of a smoother uses (:func:`fusionbench.bench.runner._prefix_settling`).
 
         Returns
         -------
         FactorGraphAligner
         """
         lean = self.estimate_only()
-        lean._warm, lean._kept = None, []
-        lean.align(imu, site, init=init, aiding=aiding)
-        lean._warm, lean._kept = (imu, lean._kept), None
+        lean._keeps, lean._solved = False, None
+        runs = _prefix_runs(self._solved, imu)
+        if runs is None:  # not the record this aligner last solved: solve it
+            solver = GraphSolver.keeping_solutions(lean)  # (the adaptive graph offers no keeper to the runner)
+            solver.align(imu, site, init=init, aiding=aiding)
+            runs = solver._solved[1]
+        lean._warm = (imu, runs[:imu.runs])
         return lean
 
     def _warm_runs(self, imu):
         """The kept solutions, one per run, when ``imu`` is a prefix of the record they solved; else None."""
-        if self._warm is None:
-            return None
-        whole, runs = self._warm
-        n = imu.t.size
-        if (imu.kind != whole.kind or imu.runs > len(runs) or n > whole.t.size
-                or not np.array_equal(imu.t, whole.t[:n]) or not np.array_equal(imu.gyro, whole.gyro[:imu.runs, :n])
-                or not np.array_equal(imu.accel, whole.accel[:imu.runs, :n])):
-            return None
-        return runs
+        return _prefix_runs(self._warm, imu)
 
     @staticmethod
     def _warm_start(kept, counts, seg):

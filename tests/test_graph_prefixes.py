@@ -6,6 +6,7 @@ import pytest
 
 from baselines.factor_graph import FactorGraphAligner, RobustFactorGraphAligner
 from baselines.graph_adaptive import AdaptiveFactorGraphAligner
+from baselines.graph_solve import GraphSolver
 from fusionbench.bench import runner
 from fusionbench.methods.aligner import Site
 from fusionbench.simulation import attitude, trajectory as tj
@@ -62,7 +63,7 @@ def test_a_prefix_starts_from_the_record_and_lands_on_the_cold_solution(cls, amp
 
 
 def test_the_adaptive_graph_leaves_its_prefixes_to_the_runner():
-    assert AdaptiveFactorGraphAligner.prefix_aligner is None
+    assert AdaptiveFactorGraphAligner.prefix_aligner is None and AdaptiveFactorGraphAligner.keeping_solutions is None
     assert callable(RobustFactorGraphAligner(imu="navigation").prefix_aligner)
 
 
@@ -109,3 +110,31 @@ def test_the_runner_reads_the_same_settling_with_and_without_the_prefix_aligner(
     assert np.array_equal(warm[0], cold[0]) and np.array_equal(warm[1], cold[1])
     # a band of 6 arcmin about zero (the limit set to zero): settled after several prefix steps, both runs
     assert np.all(warm[0] >= 50.0) and np.all(warm[1])
+
+
+def test_a_keeper_starts_the_prefixes_from_its_own_align_of_the_record_without_solving_it_again():
+    _, data, site = _record((5, 7, 9), seed=6, duration=200.0)
+    _, other, _ = _record((5, 7, 9), seed=7, duration=200.0)
+    keeper = RobustFactorGraphAligner(imu="navigation").keeping_solutions()
+    assert keeper.align(data, site).sigma_phi is not None  # the runner's align: the marginals too
+    first = IMUData(data.t, data.gyro[:1], data.accel[:1], data.kind)  # the runs whose settling the runner reads
+    solved = []
+    original = GraphSolver._solve
+
+    def spy(self, problem, *args, **kwargs):
+        solved.append(problem["counts"].size)
+        return original(self, problem, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(GraphSolver, "_solve", spy)
+        kept = keeper.estimate_only().prefix_aligner(first, site)  # as the runner asks for it
+        assert solved == []
+        fresh = RobustFactorGraphAligner(imu="navigation").prefix_aligner(first, site)
+        assert solved == [201]  # the whole record (200 keyframe intervals), solved by the fresh one only
+        assert kept.marginals is False
+        for seconds in (150.0, 75.5):  # the same start, the same solution: to the bit
+            a, b = kept.align(_prefix(first, seconds), site), fresh.align(_prefix(first, seconds), site)
+            assert np.array_equal(a.C_bn, b.C_bn)
+        del solved[:]
+        keeper.prefix_aligner(other, site)  # another record: solved
+        assert solved and solved[0] == 201

@@ -157,6 +157,8 @@ def _align_batch(scn, name, sim, first_run, refusals):
         opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
         desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
     stream = isinstance(data, streaming.SimulatedStream)
+    if not stream and callable(getattr(method, "keeping_solutions", None)):  # a smoother whose prefixes start
+        method = method.keeping_solutions()  # from its whole record's solution: keep it (_prefix_settling)
     t0 = time.perf_counter()
     try:
         res = method.align_chunks(data, scn.site, data, init=init) if stream else \
@@ -242,7 +244,9 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
     Only runs ``first_run + i < PREFIX_RUNS`` are measured (the same runs whatever the batching); the others
     get NaN. A method with ``estimate_only()`` aligns the prefixes with that copy (the same attitudes without the
     uncertainty figures: gtsam's marginals); one with ``prefix_aligner(imu, site, aiding, init)`` with the copy that
-    returns, which solves the whole record once and starts each prefix from that solution (the graphs).
+    returns, which starts each prefix from the whole record's solution (the graphs): the one ``method`` kept when
+    it is the copy ``keeping_solutions()`` returned and aligned the record (:func:`_align_batch`), else one the
+    copy solves.
 
     Returns ``(settle (R,) s, settled (R,) bool)``; ``settled`` (inside the band at the end) for every run."""
     band = scn.settling_band_arcmin * units.ARCMIN
