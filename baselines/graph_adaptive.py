@@ -69,10 +69,6 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
                    "variance-component estimation)")
     # claims as gtsam; with a tactical IMU on a fixed base 0.80-1.42 (1.59 at 60 N, static, while the tiles' share of
     # the IMU noise shrank with the IMU's variance factor: graph_build keeps it at the nominal one at least)
-    #: No prefix aligner: its cost on a prefix is the re-weighting (:meth:`_refine`), not the start, and solving the
-    #: record once more first made its settling slower (0.95x, benchmarks/perf_prefixes.py --quick)
-    prefix_aligner = None
-    keeping_solutions = None
 
     def __init__(self, adapt_window_s=10.0, adapt_iterations=6, adapt_tol=0.05, adapt_smooth=5, adapt_min_dof=10.0,
                  adapt_prior_dof=10.0, adapt_bounds=(1e-2, 1e4), imu="navigation", vref_sigma=0.01, **kw):

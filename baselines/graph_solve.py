@@ -81,7 +81,7 @@ class GraphSolver(GraphBuilder):
         lean._keeps, lean._solved = False, None
         runs = _prefix_runs(self._solved, imu)
         if runs is None:  # not the record this aligner last solved: solve it
-            solver = GraphSolver.keeping_solutions(lean)  # (the adaptive graph offers no keeper to the runner)
+            solver = lean.keeping_solutions()
             solver.align(imu, site, init=init, aiding=aiding)
             runs = solver._solved[1]
         lean._warm = (imu, runs[:imu.runs])

@@ -46,10 +46,9 @@ class _NoCoarse:
 @pytest.mark.parametrize("cls, amp", [(FactorGraphAligner, (0.0, 0.0, 0.0)), (RobustFactorGraphAligner, (5, 7, 9)),
                                       (AdaptiveFactorGraphAligner, (0.0, 0.0, 0.0))])
 def test_a_prefix_starts_from_the_record_and_lands_on_the_cold_solution(cls, amp):
-    # gtsam-adaptive does not offer it to the runner (its cost is the re-weighting), but the mechanism holds for it
     _, data, site = _record(amp, seed=4)
     cold = cls(imu="navigation").estimate_only()
-    warm = FactorGraphAligner.prefix_aligner(cls(imu="navigation"), data, site)
+    warm = cls(imu="navigation").prefix_aligner(data, site)
     assert warm.marginals is False and cold.marginals is False
     warm.coarse = _NoCoarse()
     # 60.5 s: a prefix whose last keyframe interval is not one of the record's (preintegrated again)
@@ -62,9 +61,9 @@ def test_a_prefix_starts_from_the_record_and_lands_on_the_cold_solution(cls, amp
         assert _arcmin(a.C_bn, b.C_bn).max() < 0.01  # every keyframe of the prefix, not only its end
 
 
-def test_the_adaptive_graph_leaves_its_prefixes_to_the_runner():
-    assert AdaptiveFactorGraphAligner.prefix_aligner is None and AdaptiveFactorGraphAligner.keeping_solutions is None
-    assert callable(RobustFactorGraphAligner(imu="navigation").prefix_aligner)
+def test_every_graph_offers_the_runner_a_keeper_and_a_prefix_aligner():
+    for cls in (FactorGraphAligner, RobustFactorGraphAligner, AdaptiveFactorGraphAligner):
+        assert callable(cls(imu="navigation").keeping_solutions) and callable(cls(imu="navigation").prefix_aligner)
 
 
 def test_any_other_record_is_aligned_cold():
