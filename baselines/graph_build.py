@@ -15,7 +15,7 @@ from gtsam.symbol_shorthand import B, V, X
 
 from .graph_aiding import keyframe_states
 from .graph_model import STILL_WALK, UNFIXED_SIGMA, UNMEASURED_VELOCITY_SIGMA
-from .graph_rows import tile_error, tile_factors, tile_imu_variance
+from .graph_rows import Intervals, tile_error, tile_factors, tile_imu_variance
 from .graph_support import _interval_rotations, tangent_rates
 
 
@@ -24,22 +24,23 @@ class GraphBuilder:
     figures (``gyro_noise``, ``accel_noise``, ``integration_sigma``, bias priors and walk, ``bias_interval_s``,
     ``vref_sigma``, ``aiding_position_sigma``, ``position_sigma``, ``init_sigma``, ``robust``, ``huber_k``)."""
 
-    def _tile_variance(self, g, data, pims, poses, imu_scale=None):
+    def _tile_variance(self, g, data, pims, R, imu_scale=None):
         """Variance (K, 3) (m/s)^2 or m^2, ENU, of the tile factors of group ``g`` ("v" velocity, "p" position)
         before any Huber weight: the rows' own (their unit sigma squared times ``data[g]["var"]``) and, for the
         velocity tiles, what the IMU's own noise leaves in the prediction (:func:`baselines.graph_rows.tile_imu_variance`
-        at the keyframe ``poses``), at least the nominal share: the ImuFactors' residuals, which the tiles share, put
+        at the keyframe attitudes ``R``), at least the nominal share: the ImuFactors' residuals, which the tiles share, put
         the adaptive IMU factor ``imu_scale`` below 1 with an exact reference, and a share scaled down with it left
         gtsam-adaptive 1.59 bounds off at 60 N (tactical IMU; 0.90 with this floor)."""
         unit = self.vref_sigma if g == "v" else self.aiding_position_sigma
         var = unit**2 * data[g]["var"]
         if g == "v":
             scale = None if imu_scale is None else np.maximum(imu_scale, 1.0)
-            var = var + tile_imu_variance(pims, poses, scale)
+            var = var + tile_imu_variance(pims, R, scale)
         return var
 
-    def _huber_weights(self, problem, data, values, pims, imu_scale=None):
-        """Huber weights of the tile factors at ``values``, ``{"v": (K,), "p": (K,)}`` (robust variant; all 1
+    def _huber_weights(self, problem, data, states, pims, imu_scale=None):
+        """Huber weights of the tile factors at the keyframe ``states`` (:func:`baselines.graph_aiding.keyframe_states`
+        of a solution), ``{"v": (K,), "p": (K,)}`` (robust variant; all 1
         otherwise): 1 within ``huber_k`` sigmas of the whitened error's norm, ``huber_k / |e|`` beyond (gtsam's
         Huber on a block). The error is whitened by the factor's whole variance (:meth:`_tile_variance`), the IMU's
         share included, so that a tile the factor itself expects to be off is not down-weighted for it."""
@@ -47,11 +48,10 @@ class GraphBuilder:
         out = {g: np.ones(K) for g in ("v", "p")}
         if not self.robust:
             return out
-        R, t, v, b = keyframe_states(values, K, problem["seg"])
-        poses = [values.atPose3(X(k)) for k in range(K)]
+        R, t, v, b = states
         for g in ("v", "p"):
             if data[g] is not None:
-                e = tile_error(data[g], R, t, v, b) / np.sqrt(self._tile_variance(g, data, pims, poses, imu_scale))
+                e = tile_error(data[g], R, t, v, b) / np.sqrt(self._tile_variance(g, data, pims, R, imu_scale))
                 r = np.linalg.norm(np.where(np.isfinite(data[g]["var"]), e, 0.0), axis=1)
                 out[g] = np.where(r <= self.huber_k, 1.0, self.huber_k / np.maximum(r, 1e-300))
         return out
@@ -95,7 +95,7 @@ class GraphBuilder:
         zero = gtsam.imuBias.ConstantBias()
         same = np.all(w_in == w_in[0]) and np.all(g == g[0])
         params = self._params(g[0], w_in[0]) if same else None
-        pims = []
+        pims = Intervals()
         for k in range(1, K):
             pim = gtsam.PreintegratedImuMeasurements(params if same else self._params(g[k - 1], w_in[k - 1]), zero)
             for i in range(counts[k - 1], counts[k]):
@@ -103,9 +103,10 @@ class GraphBuilder:
             pims.append(pim)
         return pims
 
-    def _graph(self, pims, data, refs, seg, walk, at, imu_scale=None, huber=None):
+    def _graph(self, pims, data, refs, seg, walk, at, imu_scale=None, huber=None, states=None):
         """The factor graph of one recording from its preintegrated intervals ``pims`` and its tile factors'
-        ``data`` (:func:`baselines.graph_aiding.tile_data`), linearised at the values ``at``.
+        ``data`` (:func:`baselines.graph_aiding.tile_data`), linearised at the values ``at`` (``states``: their
+        keyframe states, :func:`baselines.graph_aiding.keyframe_states`, when the caller has them).
 
         ``imu_scale`` (K-1,) multiplies the preintegrated covariance of each interval, ``huber`` (``{"v": (K,), "p":
         (K,)}``) the tile factors' information (default 1). Returns the graph and the indices of its ImuFactors
@@ -124,14 +125,14 @@ class GraphBuilder:
             imu_idx[k - 1] = graph.size()
             graph.add(f)
         keys = [(X(k), V(k), B(seg[min(k, K - 2)])) for k in range(K)]
-        lin = ([at.atPose3(X(k)) for k in range(K)], np.stack([at.atVector(V(k)) for k in range(K)]),
-               [at.atConstantBias(key[2]) for key in keys])
+        if states is None and (data["v"] is not None or data["p"] is not None):
+            states = keyframe_states(at, K, seg)
         for g in ("v", "p"):
             if data[g] is None:
                 continue
             w = 1.0 if huber is None else huber[g][:, None]
-            var = self._tile_variance(g, data, pims, lin[0], imu_scale) / w
-            for k, f in tile_factors(data[g], np.sqrt(var), keys, lin, at):
+            var = self._tile_variance(g, data, pims, states[0], imu_scale) / w
+            for k, f in tile_factors(data[g], np.sqrt(var), keys, states, at):
                 idx[g][k] = graph.size()
                 graph.add(f)
         free = np.ones(3, bool) if refs["pos"] is None else ~np.any(refs["pos"]["W"] > 0, axis=0)

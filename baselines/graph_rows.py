@@ -226,7 +226,7 @@ def tile_error(d, R, t, v, b_acc):
     return e + t if d["position"] else e
 
 
-def tile_factors(d, sigma, keys, at, values=None):
+def tile_factors(d, sigma, keys, states, values):
     """The tile factors of the keyframes, each linearised at its keyframe's current values (a
     ``gtsam.LinearContainerFactor``: in C++; the caller relinearises when the attitude moved).
 
@@ -243,24 +243,19 @@ def tile_factors(d, sigma, keys, at, values=None):
         Standard deviation of each mean, m/s or m; inf: no factor row on that axis (no factor without any).
     keys : sequence of (int, int, int)
         ``X(k)``, ``V(k)``, ``B(j)`` of each keyframe.
-    at : (sequence, ndarray, sequence)
-        Linearisation point: the K poses (``gtsam.Pose3``), velocities (K, 3) m/s and biases
-        (``gtsam.imuBias.ConstantBias``).
-    values : gtsam.Values, optional
-        The same point as ``at``, every key in one container (the solver's values): each factor copies its own keys
-        from it. Default: a container per factor built from ``at`` (three inserts a keyframe, the larger part of
-        the graph's construction).
+    states : (ndarray, ndarray, ndarray, ndarray)
+        Linearisation point: the keyframes' attitudes ``C_bn`` (K, 3, 3), positions (K, 3) m, velocities (K, 3) m/s
+        and accelerometer biases (K, 3) m/s^2 (:func:`baselines.graph_aiding.keyframe_states` of ``values``).
+    values : gtsam.Values
+        The same point, every key in one container (the solver's values): each factor copies its own keys from it.
 
     Returns
     -------
     list of (int, gtsam.LinearContainerFactor)
         The keyframe index and its factor, for the keyframes with one.
     """
-    poses, v, biases = at
-    K = len(poses)
-    R = np.stack([p.rotation().matrix() for p in poses])
-    t = np.stack([p.translation() for p in poses])
-    b_acc = np.stack([b.accelerometer() for b in biases])
+    R, t, v, b_acc = states
+    K = R.shape[0]
     Ub = d["U"] - np.einsum("kaij,kj->kai", d["Mb"], b_acc)
     e0 = tile_error(d, R, t, v, b_acc)
     H_x = np.zeros((K, 3, 6))
@@ -278,17 +273,30 @@ def tile_factors(d, sigma, keys, at, values=None):
         key_x, key_v, key_b = keys[k]
         noise = gtsam.noiseModel.Diagonal.Sigmas(sigma[k, a])
         jf = gtsam.JacobianFactor(key_x, H_x[k, a], key_v, H_v[k, a], key_b, H_b[k, a], -e0[k, a], noise)
-        lin = values
-        if lin is None:
-            lin = gtsam.Values()
-            lin.insert(key_x, poses[k])
-            lin.insert(key_v, np.asarray(v[k], dtype=float))
-            lin.insert(key_b, biases[k])
-        out.append((k, gtsam.LinearContainerFactor(jf, lin)))
+        out.append((k, gtsam.LinearContainerFactor(jf, values)))
     return out
 
 
-def tile_imu_variance(pims, poses, scale=None):
+def interval_velocity_cov(pims):
+    """The velocity block (K - 1, 3, 3) (m/s)^2 of each interval's preintegrated covariance, in the body frame of the
+    interval's start; read once from a :class:`Intervals` and kept on it (the graph and the Huber weights read it
+    at every pass)."""
+    cov = getattr(pims, "velocity_cov", None)
+    if cov is None:
+        cov = np.stack([p.preintMeasCov()[6:9, 6:9] for p in pims])
+        if isinstance(pims, Intervals):
+            pims.velocity_cov = cov
+    return cov
+
+
+class Intervals(list):
+    """The preintegrated intervals of a recording (``gtsam.PreintegratedImuMeasurements``, a list) with what is
+    read from them kept beside (:func:`interval_velocity_cov`)."""
+
+    velocity_cov = None
+
+
+def tile_imu_variance(pims, R, scale=None):
     """Variance (K, 3) (m/s)^2, ENU, that the IMU's own noise leaves in a tile's velocity prediction: the velocity
     block of the preintegrated covariance of the intervals on either side of keyframe k (their mean; one at the ends),
     turned into ENU with the keyframe's attitude.
@@ -304,16 +312,15 @@ def tile_imu_variance(pims, poses, scale=None):
     ----------
     pims : sequence of gtsam.PreintegratedImuMeasurements
         The K - 1 intervals.
-    poses : sequence of gtsam.Pose3
-        The K keyframes' poses (attitude ``C_bn``).
+    R : ndarray, shape (K, 3, 3)
+        The K keyframes' attitudes ``C_bn``.
     scale : ndarray, shape (K - 1,), optional
         A factor on each interval's covariance (the adaptive graph's).
     """
-    K = len(poses)
-    cov = np.stack([p.preintMeasCov()[6:9, 6:9] for p in pims])  # (K-1, 3, 3): body frame of the interval's start
+    K = R.shape[0]
+    cov = interval_velocity_cov(pims)  # (K-1, 3, 3): body frame of the interval's start
     if scale is not None:
         cov = cov * np.asarray(scale, dtype=float)[:, None, None]
-    R = np.stack([p.rotation().matrix() for p in poses])
     enu = R[:-1] @ cov @ np.swapaxes(R[:-1], -1, -2)
     d = np.diagonal(enu, axis1=1, axis2=2)
     out = np.empty((K, 3))

@@ -16,8 +16,9 @@ from gtsam.symbol_shorthand import B, V, X
 
 from fusionbench.simulation.attitude import dcm_to_rotvec
 
-from .graph_aiding import tile_data
+from .graph_aiding import keyframe_states, tile_data
 from .graph_build import GraphBuilder
+from .graph_rows import Intervals
 
 
 def _prefix_runs(solved, imu):
@@ -106,7 +107,7 @@ class GraphSolver(GraphBuilder):
             values.insert(B(j), values_all.atConstantBias(B(j)))
         C_kf = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
         same = K <= counts_all.size and np.array_equal(counts, counts_all[:K])
-        return C_kf, values, (list(pims_all[:K - 1]) if same else None)
+        return C_kf, values, (Intervals(pims_all[:K - 1]) if same else None)
 
     def _optimize(self, graph, values):
         lm = gtsam.LevenbergMarquardtParams()
@@ -142,6 +143,7 @@ class GraphSolver(GraphBuilder):
                 values.insert(V(k), v0[k])
             for j in range(int(seg.max()) + 1):
                 values.insert(B(j), gtsam.imuBias.ConstantBias())
+        states = keyframe_states(values, K, seg)  # of the current values: the graph's linearisation point
         iterations, converged, moved = 0, True, 0.0
         huber = None  # the Huber weights need the intervals' covariance (the tiles' IMU share): first pass below
         c_max = np.abs(problem["c_n"]).max()
@@ -152,15 +154,16 @@ class GraphSolver(GraphBuilder):
             if n_pass > 1 and moved > self.recompensate_rad:  # the lever arm and the turn of ENU at the new attitude
                 data = tile_data(problem, C_kf)
             if huber is None:
-                huber = self._huber_weights(problem, data, values, pims, imu_scale)
-            graph, imu_idx, idx = self._graph(pims, data, problem, seg, walk, values, imu_scale, huber)
+                huber = self._huber_weights(problem, data, states, pims, imu_scale)
+            graph, imu_idx, idx = self._graph(pims, data, problem, seg, walk, values, imu_scale, huber, states)
             values, n_it = self._optimize(graph, values)
             iterations += n_it
             converged = converged and n_it < self.max_iterations  # a pass stopped at the limit may have stalled
-            C_new = np.stack([values.atPose3(X(k)).rotation().matrix() for k in range(K)])
+            states = keyframe_states(values, K, seg)
+            C_new = states[0]
             moved = np.abs(dcm_to_rotvec(C_new @ np.swapaxes(C_kf, -1, -2))).max()
             C_kf = C_new
-            new_huber = self._huber_weights(problem, data, values, pims, imu_scale)
+            new_huber = self._huber_weights(problem, data, states, pims, imu_scale)
             settled = max(np.abs(new_huber[g] - huber[g]).max() for g in huber) <= 1e-3
             huber = new_huber
             if moved <= self.recompensate_rad and settled:

@@ -168,7 +168,7 @@ def test_a_tile_holds_the_imus_own_velocity_noise_over_an_interval():
     # preintegrated covariance is q T per axis, in ENU whatever the attitude (isotropic); two intervals' mean inside
     import gtsam
 
-    from baselines.graph_rows import tile_imu_variance
+    from baselines.graph_rows import Intervals, tile_imu_variance
 
     q, T = (50 * units.UG_PER_SQRT_HZ) ** 2, 1.0
     p = gtsam.PreintegrationParams.MakeSharedU(9.8)
@@ -181,10 +181,13 @@ def test_a_tile_holds_the_imus_own_velocity_noise_over_an_interval():
         for _ in range(int(scale * 50)):
             pim.integrateMeasurement(np.array([0.0, 0.0, 9.8]), np.zeros(3), T / 50)
         pims.append(pim)
-    poses = [gtsam.Pose3(gtsam.Rot3(attitude.euler_to_dcm([0.1, -0.2, a])), np.zeros(3)) for a in (0.3, 2.0, -1.0)]
-    var = tile_imu_variance(pims, poses)
+    R = np.stack([attitude.euler_to_dcm([0.1, -0.2, a]) for a in (0.3, 2.0, -1.0)])
+    var = tile_imu_variance(pims, R)
     assert var == pytest.approx(np.array([[q * T] * 3, [2 * q * T] * 3, [3 * q * T] * 3]), rel=1e-6)
-    assert tile_imu_variance(pims, poses, scale=np.array([2.0, 1.0]))[0] == pytest.approx([2 * q * T] * 3, rel=1e-6)
+    assert tile_imu_variance(pims, R, scale=np.array([2.0, 1.0]))[0] == pytest.approx([2 * q * T] * 3, rel=1e-6)
+    kept = Intervals(pims)  # the covariance read once and kept on the intervals: the same figures
+    assert np.array_equal(tile_imu_variance(kept, R), var) and kept.velocity_cov is not None
+    assert np.array_equal(tile_imu_variance(kept, R), var)
 
 
 def test_an_exact_reference_leaves_a_tactical_heading_within_its_bound():

@@ -103,11 +103,12 @@ def test_the_tile_factor_is_its_error_linearised_in_gtsams_tangent(position):
     v = np.array([0.4, 0.1, -0.3])
     bias = gtsam.imuBias.ConstantBias(np.array([0.01, -0.02, 0.03]), np.array([1e-5, 2e-5, -1e-5]))
     sigma = np.array([[0.5, 2.0, np.inf]])
-    [(k, f)] = tile_factors(d, sigma, keys, ([pose], v[None], [bias]))
     values = gtsam.Values()
     values.insert(keys[0][0], pose)
     values.insert(keys[0][1], v)
     values.insert(keys[0][2], bias)
+    states = (pose.rotation().matrix()[None], pose.translation()[None], v[None], bias.accelerometer()[None])
+    [(k, f)] = tile_factors(d, sigma, keys, states, values)
 
     def error(p, vel, b):
         return tile_error(d, p.rotation().matrix()[None], p.translation()[None], vel[None], b.accelerometer()[None])[0]
@@ -139,7 +140,7 @@ def test_the_tile_factor_is_its_error_linearised_in_gtsams_tangent(position):
     whole = gtsam.Values(values)
     whole.insert(X(4), pose.retract(-dx))
     whole.insert(V(4), -v)
-    [(_, g)] = tile_factors(d, sigma, keys, ([pose], v[None], [bias]), whole)
+    [(_, g)] = tile_factors(d, sigma, keys, states, whole)
     assert g.error(moved) == f.error(moved) and g.error(values) == f.error(values)
     assert np.array_equal(g.linearize(moved).jacobian()[1], f.linearize(moved).jacobian()[1])
 
