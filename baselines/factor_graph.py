@@ -261,6 +261,8 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
             problem.update(seg=seg, walk=walk)
             if warm:
                 C_start, values, pims = self._warm_start(warm[r], counts, seg)
+                if pims is not None:  # the record's intervals: its gyro rates too (each interval's its own)
+                    problem["gyr"] = warm[r][3][:counts[-1]]
                 sol = self._solve(problem, C_start, values=values, pims=pims)
             else:
                 _, dR = _interval_rotations(problem["phi"], counts, None)
@@ -286,7 +288,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
             sol, more = self._refine(problem, sol)
             per_run.append(more)
             if self._keeps:
-                kept.append((counts, sol[1], sol[8]))
+                kept.append((counts, sol[1], sol[8], problem["gyr"]))
             graph, values, C_kf, iters[r], passes[r] = sol[:5]
             cost[r] = graph.error(values)
             C_out[r] = C_kf

@@ -83,7 +83,8 @@ class GraphBuilder:
 
     def _preintegrate(self, problem, C_kf):
         """Preintegrated IMU measurements of the K-1 keyframe intervals; the transport-rate correction
-        uses attitude ``C_kf`` (K, 3, 3)."""
+        uses attitude ``C_kf`` (K, 3, 3). The gyro rates (:func:`baselines.graph_support.tangent_rates`), which do not
+        depend on the attitude, are computed once and kept in ``problem["gyr"]``."""
         phi, dv, dt, counts = problem["phi"], problem["dv"], problem["dt"], problem["counts"]
         w_in, c_n, g = problem["w_in"], problem["c_n"], problem["g"]
         K = counts.size
@@ -91,7 +92,9 @@ class GraphBuilder:
         if np.any(c_n):
             c_b, _ = _interval_rotations(phi, counts, np.einsum("kji,kj->ki", C_kf[:-1], c_n))
             acc = acc + c_b
-        gyr = tangent_rates(phi, counts, dt)
+        gyr = problem.get("gyr")
+        if gyr is None:
+            gyr = problem["gyr"] = tangent_rates(phi, counts, dt)
         zero = gtsam.imuBias.ConstantBias()
         same = np.all(w_in == w_in[0]) and np.all(g == g[0])
         params = self._params(g[0], w_in[0]) if same else None

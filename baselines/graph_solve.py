@@ -40,7 +40,7 @@ class GraphSolver(GraphBuilder):
     :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``),
     and its record's prefixes from the whole record's solution (:meth:`prefix_aligner`)."""
 
-    #: The record a prefix aligner solved and each run's ``(counts, values, pims)`` (:meth:`prefix_aligner`).
+    #: The record a prefix aligner solved and each run's ``(counts, values, pims, gyro rates)`` (:meth:`prefix_aligner`).
     _warm = None
     #: Whether ``_align`` keeps the record and each run's solution in ``_solved`` (:meth:`keeping_solutions`).
     _keeps = False
@@ -52,7 +52,7 @@ class GraphSolver(GraphBuilder):
         that record (or on its first runs) starts from it instead of solving the record again. What the runner
         aligns a smoother's whole record with before it reads the settling off the prefixes
         (:func:`fusionbench.bench.runner._align_batch`); it holds the record and each run's keyframe values and
-        preintegrated intervals (about 1 MB a run of 600 keyframes) until it is dropped.
+        preintegrated intervals and gyro rates (about 1 MB a run of 600 keyframes at 100 Hz) until it is dropped.
 
         Returns
         -------
@@ -97,7 +97,7 @@ class GraphSolver(GraphBuilder):
         """``(C_kf, values, pims)`` for :meth:`_solve` on a prefix with keyframe ``counts`` (K,) and bias segments
         ``seg``: the kept solution's first K keyframes and bias keys, and its intervals when the prefix's are the
         same ones (else None: preintegrated again)."""
-        counts_all, values_all, pims_all = kept
+        counts_all, values_all, pims_all = kept[:3]
         K = counts.size
         values = gtsam.Values()
         for k in range(K):

@@ -137,3 +137,18 @@ def test_a_keeper_starts_the_prefixes_from_its_own_align_of_the_record_without_s
         del solved[:]
         keeper.prefix_aligner(other, site)  # another record: solved
         assert solved and solved[0] == 201
+
+
+def test_a_prefixs_gyro_rates_are_the_records_own():
+    # what lets a prefix reuse the record's rates (kept with its solution): each keyframe interval's rates depend on
+    # its own samples only; the same operations, so equal to rounding whatever the CPU
+    from baselines.graph_support import keyframe_counts, tangent_rates
+
+    _, data, _ = _record((5, 7, 9), seed=3, duration=120.0, runs=1)
+    phi = data.increments()[1][0]
+    counts = keyframe_counts(phi.shape[0], 50)
+    full = tangent_rates(phi, counts, DT)
+    n = counts[60]
+    part = tangent_rates(phi[:n], counts[:61], DT)
+    assert part == pytest.approx(full[:n], rel=1e-12, abs=1e-18)
+    assert np.abs(full - phi / DT).max() > 1e-9  # not the samples' own rates: the sway's turn within an interval
