@@ -244,25 +244,30 @@ class Posterior:
     def _condition(cls, cov, f, parents, A, Ri):
         """The covariances of a frontal key ``f`` given its ``parents`` (whose joint covariance ``cov`` holds):
         ``Sigma_ff = Ri Ri^T + A Sigma_PP A^T`` and ``Sigma_fp = -A Sigma_Pp``."""
-        cross = -A @ cls._assemble(cov, parents)
-        cov[f, f] = Ri @ Ri.T - cross @ A.T
         off = _offsets(parents)
+        cross = -A @ cls._assemble(cov, parents, off)
+        cov[f, f] = Ri @ Ri.T - cross @ A.T
         for j, p in enumerate(parents):
             cov[f, p] = cross[:, off[j]:off[j + 1]]
 
     @staticmethod
-    def _assemble(cov, keys):
-        off = _offsets(keys)
+    def _assemble(cov, keys, off=None):
+        """The joint covariance of ``keys`` from the blocks ``cov`` holds (``off``: :func:`_offsets` of ``keys``).
+        Each pair is held once, as ``(a, b)`` or ``(b, a)`` (a frontal key with a parent), the other its transpose."""
+        off = _offsets(keys) if off is None else off
         P = np.zeros((off[-1], off[-1]))
         for a, ka in enumerate(keys):
-            for b, kb in enumerate(keys):
-                if (ka, kb) in cov:
-                    blk = cov[ka, kb]
-                elif (kb, ka) in cov:
-                    blk = cov[kb, ka].T
-                else:  # keys never in one clique
-                    continue
+            P[off[a]:off[a + 1], off[a]:off[a + 1]] = cov[ka, ka]
+            for b in range(a + 1, len(keys)):
+                kb = keys[b]
+                blk = cov.get((ka, kb))
+                if blk is None:
+                    blk = cov.get((kb, ka))
+                    if blk is None:  # keys never in one clique
+                        continue
+                    blk = blk.T
                 P[off[a]:off[a + 1], off[b]:off[b + 1]] = blk
+                P[off[b]:off[b + 1], off[a]:off[a + 1]] = blk.T
         return P
 
     def cov(self, keys, bias=True):
