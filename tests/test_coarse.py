@@ -88,6 +88,19 @@ def _accelerating(dt, sigma, runs=1, duration=300.0, seed=0):
     return tr, data, vref
 
 
+def test_inertial_coarse_forms_the_body_increments_a_few_runs_at_a_time_with_the_same_result(monkeypatch):
+    # the chunks are what keeps a 50-run batch of 600 s from holding (R, N, 3, 3) matrices at once; each run's pass
+    # is its own, so one run per chunk gives what one chunk of all runs gives, with and without a reference
+    _, moving, vref = _accelerating(0.1, 0.01, runs=3, duration=120.0)
+    sway = tj.EulerSway(mean=(0.5 * D, 1 * D, -30 * D), amplitude=(1 * D, 1.5 * D, 2 * D), frequency=(0.2, 0.1, 0.05))
+    swaying = simulate(tj.Trajectory(34 * D, 0.0, 0.0, sway, duration=120.0), PRESETS["navigation"], 0.1, runs=3)
+    cases = [(swaying, None), (moving, vref)]
+    whole = [InertialCoarseAligner().align(data, Site(34 * D), vref=v).C_bn for data, v in cases]
+    monkeypatch.setattr(coarse_i0, "CHUNK_SAMPLES", moving.t.size)  # one run at a time
+    for (data, v), C in zip(cases, whole):
+        assert np.array_equal(InertialCoarseAligner().align(data, Site(34 * D), vref=v).C_bn, C)
+
+
 def test_a_moving_base_with_an_exact_reference_is_aligned_exactly():
     # 0.1 g for 300 s: the motion terms C_n^i0 v reach 294 m/s and the frame's transport over the earth
     # 0.4 deg; both enter V_i0 through the reference, so a perfect IMU lands on the truth (measured
