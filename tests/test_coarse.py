@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from fusionbench.methods import coarse, coarse_i0, motion
+from fusionbench.methods import coarse_i0, motion
 from fusionbench.methods.aligner import Site
 from fusionbench.methods.coarse import CoarseAligner, InertialCoarseAligner
 from fusionbench.methods.coarse_inertial import gravity_integral_inertial
