@@ -131,9 +131,10 @@ def test_a_keeper_starts_the_prefixes_from_its_own_align_of_the_record_without_s
         fresh = RobustFactorGraphAligner(imu="navigation").prefix_aligner(first, site)
         assert solved == [201]  # the whole record (200 keyframe intervals), solved by the fresh one only
         assert kept.marginals is False
-        for seconds in (150.0, 75.5):  # the same start, the same solution: to the bit
+        for seconds in (150.0, 75.5):  # the same start (the record solved in a batch of 2 runs, and of 1), the same
+            # solution: bit for bit here; held, as the cold solutions above, to LM's tolerance on another CPU
             a, b = kept.align(_prefix(first, seconds), site), fresh.align(_prefix(first, seconds), site)
-            assert np.array_equal(a.C_bn, b.C_bn)
+            assert np.array_equal(a.t, b.t) and _arcmin(a.C_bn, b.C_bn).max() < 0.01
         del solved[:]
         keeper.prefix_aligner(other, site)  # another record: solved
         assert solved and solved[0] == 201
