@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from fusionbench.methods import coarse_i0
 from fusionbench.methods.aligner import Site
 from fusionbench.methods.coarse import InertialCoarseAligner
 from fusionbench.methods.coarse_aided import aiding_rows, fit_blocks, place
@@ -17,6 +18,7 @@ from fusionbench.simulation.aidingsim import AidingSpec, simulate_aiding
 from fusionbench.simulation.drive import car_drive
 from fusionbench.simulation.imu import IMUSpec, simulate
 from fusionbench.simulation.imudata import IMUData
+from tests.conftest import agree_to_rounding
 
 D = np.pi / 180
 LAT, T = 34 * D, 300.0
@@ -150,6 +152,27 @@ def test_noisy_rows_cost_what_the_linearized_fit_leaves(car, kind):
     pred = np.sqrt(np.diag(C_end.T @ cov @ C_end))
     err = _error(traj, data, _rows(traj, data, 1.0, kind, sigma, runs=runs, seed=2))
     _check_spread(err, pred)
+
+
+@pytest.mark.parametrize("case", ["velocity-1hz-lever-delay-outage", "position-1hz-lever-delay-outage"])
+def test_the_fit_on_the_rows_a_run_at_a_time_gives_the_whole_batchs(car, case, monkeypatch):
+    # a 50-run batch with a velocity row on every sample held the fit's (R, rows, 3, 3) frames at once (0.73 GB):
+    # coarse-i0 fits a few runs at a time. Each run's fit is its own (noisy rows and IMU of its own: a run's track or
+    # rotation given to another moves its attitude by arcminutes), so one run per chunk gives the batch's attitudes
+    # and residuals to rounding (the same operations on arrays of another length: bit for bit here, an ulp or so per
+    # step of the 300-s track on another CPU's vector loops)
+    traj, _ = car
+    data = _data(traj, 0.02, runs=3, seed=4)
+    rate, kind, spec = CASES[case]
+    aid = _rows(traj, data, rate, kind, 0.05 if kind == "velocity" else 0.5, runs=3, seed=4, **spec)
+    site = Site(traj.lat, traj.lon, traj.h)
+    whole = InertialCoarseAligner().align(data, site, aiding=aid)
+    monkeypatch.setattr(coarse_i0, "CHUNK_SAMPLES", 1)  # one run at a time, in the pass and in the fit
+    parts = InertialCoarseAligner().align(data, site, aiding=aid)
+    assert np.ptp(attitude.misalignment(whole.C_bn_final, whole.C_bn_final[:1]), axis=0).max() > units.ARCMIN
+    agree_to_rounding(parts.C_bn, whole.C_bn, roundings=1e4, scale=1.0)
+    for key in ("fit_residual_mps", "gravity_excess"):
+        agree_to_rounding(parts.extra[key], whole.extra[key], roundings=1e4)
 
 
 def test_a_coarse_stage_on_the_rows_of_part_of_a_record(car):

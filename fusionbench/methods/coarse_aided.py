@@ -39,7 +39,7 @@ the same times (it is known at the increment ends; a row between two is weighted
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -88,6 +88,10 @@ class Rows:
     lever_arm: np.ndarray
     pos_t: np.ndarray | None = None
     pos: np.ndarray | None = None
+
+    def runs(self, part: slice) -> Rows:
+        """The rows of the recordings ``part`` (a slice of the R)."""
+        return replace(self, v=self.v[part], pos=None if self.pos is None else self.pos[part])
 
 
 def aiding_rows(aiding, runs, who) -> Rows:
@@ -270,6 +274,11 @@ class ImuAtRows:
     C: np.ndarray | None
     C_pos: np.ndarray | None
     w: np.ndarray | None
+
+    def runs(self, part: slice) -> ImuAtRows:
+        """What the IMU gives at the rows for the recordings ``part`` (a slice of the R)."""
+        return ImuAtRows(*(None if x is None else x[part] for x in (self.V, self.V_bridge, self.P_pos, self.C,
+                                                                     self.C_pos, self.w)))
 
 
 def imu_at_rows(pl, V_out, P_out, vkeep, C_out, ckeep, dth, dt, lever) -> ImuAtRows:

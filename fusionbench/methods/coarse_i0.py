@@ -24,8 +24,9 @@ NAME = "coarse-i0"
 #: error its noise may cause, rad (3e-5: 0.1 arcmin); :func:`fusionbench.methods.coarse_level.relevel`.
 LEVEL_WINDOW_S = 20.0
 LEVEL_NOISE_MAX = 3e-5
-#: Samples (runs x increments) whose body increments are formed at once: (R, N, 3, 3) matrices of a whole batch
-#: (50 runs of 600 s at 100 Hz) and their temporaries made coarse-i0 the largest process of ``run all`` (1.85 GB).
+#: Samples (runs x increments, or runs x rows of the aiding) whose body increments, or whose fit on the rows, are
+#: formed at once: a whole batch's (50 runs of 600 s at 100 Hz, a velocity row on each sample) made coarse-i0 the
+#: largest process of ``run all`` (1.85 GB; the body increments 0.25 GB of it, the fit on the rows 0.73 GB).
 CHUNK_SAMPLES = 2**18
 
 
@@ -93,7 +94,7 @@ def inertial_coarse(imu, site, aiding, history_points: int = 100, fit_points: in
         C_n_i0 = np.broadcast_to(rotvec_to_dcm(np.outer(tk, u * earth.OMEGA_IE)), (R, keep.size, 3, 3))
         level_rows = None
     else:
-        C_b0_i0, resid, excess, v, T, track = aided_fit(
+        C_b0_i0, resid, excess, v, T, track = _aided_fit_by_runs(
             rows, pl, imu_at_rows(pl, V_out, P_out, vkeep, C_out, ckeep, dth, imu.dt, lever), site, t, imu.t0,
             fit_points, who)
         lat_k, dlon_k = (np.stack([np.interp(t[keep], T, x[r]) for r in range(R)]) for x in track[:2])
@@ -109,3 +110,17 @@ def inertial_coarse(imu, site, aiding, history_points: int = 100, fit_points: in
     # settling is measured on prefixes; the attitude at the last sample is what a user gets)
     return AlignmentResult(name, t[keep][hist], C_bn, {"fit_residual_mps": resid, "gravity_excess": excess},
                            causal=False)
+
+
+def _aided_fit_by_runs(rows, pl, imu_rows, site, t, t0, fit_points, who):
+    """:func:`fusionbench.methods.coarse_aided.aided_fit` a few recordings at a time (each recording's fit is its own):
+    the same outputs, the runs joined."""
+    R, grid = rows.v.shape[0], rows.tau.size + pl.bridge.size + pl.kp.size
+    step = max(1, CHUNK_SAMPLES // max(grid, 1))
+    parts = [aided_fit(rows.runs(slice(r, r + step)), pl, imu_rows.runs(slice(r, r + step)), site, t, t0, fit_points,
+                       who) for r in range(0, R, step)]
+    if len(parts) == 1:
+        return parts[0]
+    C_b0_i0, resid, excess, v = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    track = tuple(np.concatenate([p[5][i] for p in parts]) for i in range(len(parts[0][5])))
+    return C_b0_i0, resid, excess, v, parts[0][4], track
