@@ -287,7 +287,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
                 sol = again[:3] + (sol[3] + again[3], sol[4] + again[4]) + again[5:]
             sol, more = self._refine(problem, sol)
             per_run.append(more)
-            if self._keeps:
+            if r < self._keeps:
                 kept.append((counts, sol[1], sol[8], problem["gyr"]))
             graph, values, C_kf, iters[r], passes[r] = sol[:5]
             cost[r] = graph.error(values)

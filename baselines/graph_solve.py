@@ -42,24 +42,31 @@ class GraphSolver(GraphBuilder):
 
     #: The record a prefix aligner solved and each run's ``(counts, values, pims, gyro rates)`` (:meth:`prefix_aligner`).
     _warm = None
-    #: Whether ``_align`` keeps the record and each run's solution in ``_solved`` (:meth:`keeping_solutions`).
-    _keeps = False
+    #: How many runs' solutions (the first ones) ``_align`` keeps in ``_solved`` with the record
+    #: (:meth:`keeping_solutions`; 0: none).
+    _keeps = 0
     #: A keeper's last record and its runs' solutions, as ``_warm``.
     _solved = None
 
-    def keeping_solutions(self):
+    def keeping_solutions(self, runs=None):
         """A copy that keeps each run's solution of the record it last aligned, so that :meth:`prefix_aligner` on
         that record (or on its first runs) starts from it instead of solving the record again. What the runner
         aligns a smoother's whole record with before it reads the settling off the prefixes
-        (:func:`fusionbench.bench.runner._align_batch`); it holds the record and each run's keyframe values and
-        preintegrated intervals and gyro rates (about 1 MB a run of 600 keyframes at 100 Hz) until it is dropped.
+        (:func:`fusionbench.bench.runner._align_batch`); it holds the record and each kept run's keyframe values,
+        preintegrated intervals and gyro rates (about 8 MB a run of 600 s at 100 Hz) until it is dropped.
+
+        Parameters
+        ----------
+        runs : int or None
+            Keep the solutions of the first ``runs`` recordings only (the prefixes of the others are solved from
+            the start); None: of every recording.
 
         Returns
         -------
         FactorGraphAligner
         """
         keeper = copy.copy(self)
-        keeper._keeps, keeper._solved = True, None
+        keeper._keeps, keeper._solved = (np.inf if runs is None else int(runs)), None
         return keeper
 
     def prefix_aligner(self, imu, site, aiding=None, init=None):
@@ -79,7 +86,7 @@ class GraphSolver(GraphBuilder):
         FactorGraphAligner
         """
         lean = self.estimate_only()
-        lean._keeps, lean._solved = False, None
+        lean._keeps, lean._solved = 0, None
         runs = _prefix_runs(self._solved, imu)
         if runs is None:  # not the record this aligner last solved: solve it
             solver = lean.keeping_solutions()

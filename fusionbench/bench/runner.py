@@ -157,8 +157,9 @@ def _align_batch(scn, name, sim, first_run, refusals):
         opts = ", ".join(f"{k}={v}" for k, v in scn.variants[name].items() if k != "method")
         desc = f"`{scn.variants[name]['method']}` with {opts}: {desc}"
     stream = isinstance(data, streaming.SimulatedStream)
-    if not stream and callable(getattr(method, "keeping_solutions", None)):  # a smoother whose prefixes start
-        method = method.keeping_solutions()  # from its whole record's solution: keep it (_prefix_settling)
+    n_meas = _measured_runs(first_run, data.runs)
+    if not stream and n_meas and callable(getattr(method, "keeping_solutions", None)):  # a smoother whose prefixes
+        method = method.keeping_solutions(n_meas)  # start from its record's solution: keep it (_prefix_settling)
     t0 = time.perf_counter()
     try:
         res = method.align_chunks(data, scn.site, data, init=init) if stream else \
@@ -236,6 +237,12 @@ def method_labels(scn, methods):
     return {m: (lab if taken.count(lab) == 1 else m) for m, lab in labels.items()}
 
 
+def _measured_runs(first_run, runs):
+    """How many of the batch's ``runs`` (from run ``first_run`` of the seed) a smoother's settling is measured on:
+    those among the seed's first :data:`PREFIX_RUNS`."""
+    return int(np.clip(PREFIX_RUNS - first_run, 0, runs))
+
+
 def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end, first_run=0):
     """Settling of a method that is not causal (a smoother), per run: its final azimuth error on the prefixes of
     the record ending every PREFIX_STEP_S seconds, against the limit at each prefix's end; the first prefix
@@ -254,7 +261,7 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
     method = method.estimate_only() if callable(getattr(method, "estimate_only", None)) else method
     t_inc = data.increments()[0]
     first_out = np.abs(phiu_end - limit_end) > band  # the whole record: not settled at all
-    n_meas = int(np.clip(PREFIX_RUNS - first_run, 0, data.runs))
+    n_meas = _measured_runs(first_run, data.runs)
     result = np.full(data.runs, np.nan)
     if n_meas == 0:
         return result, ~first_out
