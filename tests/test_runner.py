@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from fusionbench.bench import scenarios
+from fusionbench.bench import runner, scenarios
 from fusionbench.bench.check import compare
 from fusionbench.bench.experiment import run_scenario, write_scenario_report
 
@@ -89,6 +89,22 @@ def test_run_is_identical_whatever_the_batch_size_and_workers(tmp_path):
         assert np.array_equal(a.outcomes["coarse"].phi, other.outcomes["coarse"].phi)
     d = run_scenario(scn, runs=3, seed=8, progress=False)
     assert not np.array_equal(a.outcomes["coarse"].phi, d.outcomes["coarse"].phi)
+
+
+@pytest.mark.parametrize("runs, n, streamed, jobs, expected", [
+    (50, 60000, False, 2, 13),  # static-q-jump: 16 runs fit the budget, 4 batches (2 a worker) of 13, 13, 13, 11
+    (50, 60000, False, 1, 13),  # one process: the same 4 batches, evened out
+    (50, 5000, False, 2, 25),  # paper001 at 10 Hz: all 50 fit; one batch a worker
+    (3, 60000, False, 2, 2),  # --quick: all 3 fit; one batch a worker, of 2 and 1
+    (4, 360000, True, 2, 2),  # paper004's 20-h stream at 5 Hz: 2 runs fit the budget (a stream holds 4 at most)
+    (1, 60000, False, 2, 1),  # one run: one batch whatever the workers
+])
+def test_default_batches_fit_the_memory_budget_and_share_the_workers(runs, n, streamed, jobs, expected):
+    size = runner.default_batch_size(runs, n, streamed, jobs)
+    assert size == expected
+    batches = -(-runs // size)
+    assert size == 1 or size * n * runner.SAMPLE_BYTES <= runner.BATCH_BYTES
+    assert batches % jobs == 0 or batches == runs  # each worker as many batches, unless there are fewer runs
 
 
 def test_metrics_follow_the_contract_and_the_report_is_written(tmp_path):
