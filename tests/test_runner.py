@@ -1,11 +1,13 @@
 """Scenarios as data, the Monte Carlo runner's determinism, the report and the regression check."""
 
+import ctypes
+import ctypes.util
 import json
 
 import numpy as np
 import pytest
 
-from fusionbench.bench import runner, scenarios
+from fusionbench.bench import memory, scenarios
 from fusionbench.bench.check import compare
 from fusionbench.bench.experiment import run_scenario, write_scenario_report
 
@@ -100,11 +102,24 @@ def test_run_is_identical_whatever_the_batch_size_and_workers(tmp_path):
     (1, 60000, False, 2, 1),  # one run: one batch whatever the workers
 ])
 def test_default_batches_fit_the_memory_budget_and_share_the_workers(runs, n, streamed, jobs, expected):
-    size = runner.default_batch_size(runs, n, streamed, jobs)
+    size = memory.default_batch_size(runs, n, streamed, jobs)
     assert size == expected
     batches = -(-runs // size)
-    assert size == 1 or size * n * runner.SAMPLE_BYTES <= runner.BATCH_BYTES
+    assert size == 1 or size * n * memory.SAMPLE_BYTES <= memory.BATCH_BYTES
     assert batches % jobs == 0 or batches == runs  # each worker as many batches, unless there are fewer runs
+
+
+@pytest.mark.skipif(not hasattr(ctypes.CDLL(ctypes.util.find_library("c") or None), "malloc_trim"),
+                    reason="no glibc malloc_trim here")
+def test_the_heap_a_unit_freed_goes_back_to_the_system():
+    # 20 MB of small blocks from the C heap (what gtsam's factors are), freed: the pages stay in the process until
+    # they are handed back, which malloc_trim reports
+    libc = ctypes.CDLL(ctypes.util.find_library("c"))
+    libc.malloc.restype, libc.free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+    blocks = [libc.malloc(1000) for _ in range(20000)]
+    for b in blocks:
+        libc.free(b)
+    assert memory.release_freed_heap() is True
 
 
 def test_metrics_follow_the_contract_and_the_report_is_written(tmp_path):

@@ -8,7 +8,6 @@ and keeps the misalignment history of each run against truth. The figures of ``m
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -16,6 +15,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from fusionbench.bench import streaming
+from fusionbench.bench.memory import default_batch_size, release_freed_heap
 from fusionbench.bench.run_metrics import run_metrics
 from fusionbench.files.progress import bar as progress_bar
 from fusionbench.methods.aligner import call_align, check_time_rule
@@ -30,13 +30,6 @@ from fusionbench.simulation.imudata import IMUData
 HISTORY_POINTS = 400
 #: Window of the level-error RMS figure at the end of the record, s.
 LEVEL_WINDOW_S = 100.0
-#: Memory budget of one batch, bytes: its simulated samples and what a method holds while it aligns them.
-BATCH_BYTES = 200e6
-#: Bytes per sample of one run in a batch: its IMU increments, reference rows and truth as simulated (5.3 MB a run
-#: of static-q-jump, 600 s at 100 Hz with a velocity row on every sample) and a method's arrays over them (up to
-#: 5.8 MB more in coarse-i0's fit on the rows). At 48 (the increments alone) such a batch held 25 runs per worker
-#: and its largest worker reached 655 MB.
-SAMPLE_BYTES = 200
 
 
 @dataclass
@@ -145,7 +138,9 @@ def _run_units(scn, method_names, first_run, runs, seed, duration, refusals=Fals
         else:
             whole = whole or _simulate_batch(scn, first_run, runs, seed, duration)
             sim = whole
-        yield name, _align_batch(scn, name, sim, first_run, refusals)
+        outcome = _align_batch(scn, name, sim, first_run, refusals)
+        release_freed_heap()  # what the method freed, before the next unit's arrays come on top
+        yield name, outcome
 
 
 def _run_unit(scn, name, first_run, runs, seed, duration, refusals=False):
@@ -299,40 +294,13 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
     return result, ~first_out
 
 
-def default_batch_size(runs, n_samples, streamed, n_jobs):
-    """Runs per batch when the caller gives none: as many as fit in :data:`BATCH_BYTES` at :data:`SAMPLE_BYTES` a
-    sample (at most :data:`fusionbench.bench.streaming.STREAM_BATCH_RUNS` on a ``streamed`` record), the batches
-    then evened out, their number a multiple of the workers (``n_jobs``, -1: the cores) so that each has as many.
-
-    Parameters
-    ----------
-    runs, n_samples : int
-        Monte Carlo runs, and samples of one run's record.
-    streamed : bool
-        Whether the record goes to the methods as a stream of chunks.
-    n_jobs : int
-        Workers.
-
-    Returns
-    -------
-    int
-    """
-    fit = int(max(1, min(runs, BATCH_BYTES // (max(n_samples, 1) * SAMPLE_BYTES))))
-    if streamed:  # a streamed batch still holds its runs' whole histories
-        fit = min(fit, streaming.STREAM_BATCH_RUNS)
-    workers = 1 if n_jobs == 1 else ((os.cpu_count() or 1) if n_jobs < 0 else n_jobs)
-    batches = -(-runs // fit)
-    batches = min(runs, -(-batches // workers) * workers)
-    return -(-runs // batches)
-
-
 def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, progress=None, batch_size=None,
                   refusals=False):
     """Run an alignment scenario's Monte Carlo and compute its metrics (the ``alignment`` experiment;
     :func:`fusionbench.bench.experiment.run_scenario` runs any scenario).
 
     Parameters are :func:`fusionbench.bench.experiment.run_scenario`'s; here ``n_jobs`` are workers over batches (1,
-    or a single batch, runs in this process), ``batch_size`` defaults to :func:`default_batch_size`, and with
+    or a single batch, runs in this process), ``batch_size`` defaults to :func:`fusionbench.bench.memory.default_batch_size`, and with
     ``refusals`` a method that refuses the data (ValueError) is recorded in ``RunOutput.refused`` (name: message) and
     left out of the metrics instead of stopping the run.
 

@@ -1,0 +1,71 @@
+"""The Monte Carlo's memory: how many runs a batch holds (:func:`default_batch_size`), and the C heap a unit of work
+freed handed back to the system before the next (:func:`release_freed_heap`)."""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+
+from fusionbench.bench import streaming
+
+#: Memory budget of one batch, bytes: its simulated samples and what a method holds while it aligns them.
+BATCH_BYTES = 200e6
+#: Bytes per sample of one run in a batch: its IMU increments, reference rows and truth as simulated (5.3 MB a run
+#: of static-q-jump, 600 s at 100 Hz with a velocity row on every sample) and a method's arrays over them (up to
+#: 5.8 MB more in coarse-i0's fit on the rows). At 48 (the increments alone) such a batch held 25 runs per worker
+#: and its largest worker reached 655 MB.
+SAMPLE_BYTES = 200
+
+
+def default_batch_size(runs, n_samples, streamed, n_jobs):
+    """Runs per batch when the caller gives none: as many as fit in :data:`BATCH_BYTES` at :data:`SAMPLE_BYTES` a
+    sample (at most :data:`fusionbench.bench.streaming.STREAM_BATCH_RUNS` on a ``streamed`` record), the batches
+    then evened out, their number a multiple of the workers (``n_jobs``, -1: the cores) so that each has as many.
+
+    Parameters
+    ----------
+    runs, n_samples : int
+        Monte Carlo runs, and samples of one run's record.
+    streamed : bool
+        Whether the record goes to the methods as a stream of chunks.
+    n_jobs : int
+        Workers.
+
+    Returns
+    -------
+    int
+    """
+    fit = int(max(1, min(runs, BATCH_BYTES // (max(n_samples, 1) * SAMPLE_BYTES))))
+    if streamed:  # a streamed batch still holds its runs' whole histories
+        fit = min(fit, streaming.STREAM_BATCH_RUNS)
+    workers = 1 if n_jobs == 1 else ((os.cpu_count() or 1) if n_jobs < 0 else n_jobs)
+    batches = -(-runs // fit)
+    batches = min(runs, -(-batches // workers) * workers)
+    return -(-runs // batches)
+
+
+_libc = None  # the C library once loaded (False: none with malloc_trim)
+
+
+def release_freed_heap() -> bool:
+    """Return the C heap's free pages to the system (glibc's ``malloc_trim``); a no-op elsewhere.
+
+    gtsam's solves allocate many small C++ objects; once freed, their pages stay in the process (about 100 MB after a
+    graph's record of 600 s at 100 Hz) and the next unit's arrays come on top of them. The runner calls this after
+    each method's batch (static-q-jump's largest worker: 563 -> 524 MB).
+
+    Returns
+    -------
+    bool
+        Whether memory was returned (False also where there is no ``malloc_trim``).
+    """
+    global _libc
+    if _libc is None:
+        name = ctypes.util.find_library("c")
+        try:
+            _libc = ctypes.CDLL(name) if name else False
+        except OSError:
+            _libc = False
+    trim = getattr(_libc, "malloc_trim", None) if _libc else None
+    return bool(trim(0)) if trim is not None else False
