@@ -1,6 +1,8 @@
 """The graphs' prefix aligner (what the runner's settling of a smoother uses): each prefix of the record it solved
 starts from that solution and lands on the cold batch solution of the same prefix, to the solver's tolerance."""
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -32,6 +34,21 @@ def _prefix(data, seconds):
 
 def _arcmin(C_a, C_b):
     return np.abs(attitude.misalignment(C_a, C_b)).max(axis=-1) / D * 60.0
+
+
+@contextlib.contextmanager
+def _solves():
+    """The keyframe counts of the records ``GraphSolver._solve`` is asked to solve inside the block (a list)."""
+    solved = []
+    original = GraphSolver._solve
+
+    def spy(self, problem, *args, **kwargs):
+        solved.append(problem["counts"].size)
+        return original(self, problem, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(GraphSolver, "_solve", spy)
+        yield solved
 
 
 class _NoCoarse:
@@ -117,15 +134,7 @@ def test_a_keeper_starts_the_prefixes_from_its_own_align_of_the_record_without_s
     keeper = RobustFactorGraphAligner(imu="navigation").keeping_solutions()
     assert keeper.align(data, site).sigma_phi is not None  # the runner's align: the marginals too
     first = IMUData(data.t, data.gyro[:1], data.accel[:1], data.kind)  # the runs whose settling the runner reads
-    solved = []
-    original = GraphSolver._solve
-
-    def spy(self, problem, *args, **kwargs):
-        solved.append(problem["counts"].size)
-        return original(self, problem, *args, **kwargs)
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(GraphSolver, "_solve", spy)
+    with _solves() as solved:
         kept = keeper.estimate_only().prefix_aligner(first, site)  # as the runner asks for it
         assert solved == []
         fresh = RobustFactorGraphAligner(imu="navigation").prefix_aligner(first, site)
@@ -162,15 +171,7 @@ def test_a_keeper_of_the_first_runs_keeps_theirs_only_and_solves_a_longer_batch_
     keeper = FactorGraphAligner(imu="navigation").keeping_solutions(1)
     keeper.align(data, site)
     assert len(keeper._solved[1]) == 1
-    solved = []
-    original = GraphSolver._solve
-
-    def spy(self, problem, *args, **kwargs):
-        solved.append(problem["counts"].size)
-        return original(self, problem, *args, **kwargs)
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(GraphSolver, "_solve", spy)
+    with _solves() as solved:
         keeper.estimate_only().prefix_aligner(IMUData(data.t, data.gyro[:1], data.accel[:1], data.kind), site)
         assert solved == []
         keeper.estimate_only().prefix_aligner(data, site)  # both runs: the second was not kept, the record is solved
