@@ -43,7 +43,7 @@ class GraphSolver(GraphBuilder):
     #: The record a prefix aligner solved and each run's ``(counts, values, pims, gyro rates)`` (:meth:`prefix_aligner`).
     _warm = None
     #: How many runs' solutions (the first ones) ``_align`` keeps in ``_solved`` with the record
-    #: (:meth:`keeping_solutions`; 0: none).
+    #: (:meth:`keeping_solutions`; 0: none, inf: every run).
     _keeps = 0
     #: A keeper's last record and its runs' solutions, as ``_warm``.
     _solved = None
@@ -53,7 +53,7 @@ class GraphSolver(GraphBuilder):
         that record (or on its first runs) starts from it instead of solving the record again. What the runner
         aligns a smoother's whole record with before it reads the settling off the prefixes
         (:func:`fusionbench.bench.runner._align_batch`); it holds the record and each kept run's keyframe values,
-        preintegrated intervals and gyro rates (about 8 MB a run of 600 s at 100 Hz) until it is dropped.
+        preintegrated intervals and gyro rates (about 5 MB a run of 600 s at 100 Hz) until it is dropped.
 
         Parameters
         ----------
@@ -65,8 +65,10 @@ class GraphSolver(GraphBuilder):
         -------
         FactorGraphAligner
         """
+        if runs is not None and not runs >= 0:
+            raise ValueError(f"keeping_solutions: runs: expected a number of runs >= 0 or None, found {runs}")
         keeper = copy.copy(self)
-        keeper._keeps, keeper._solved = (np.inf if runs is None else int(runs)), None
+        keeper._keeps, keeper._solved = (np.inf if runs is None else runs), None
         return keeper
 
     def prefix_aligner(self, imu, site, aiding=None, init=None):

@@ -168,6 +168,9 @@ def test_a_keeper_of_the_first_runs_keeps_theirs_only_and_solves_a_longer_batch_
     # the runner reads the settling on the seed's first runs only: a keeper of a 25-run batch of 600 s at 100 Hz
     # held 8 MB a run it would never read (static-q-jump: 595 MB with gtsam against 383 with kf)
     _, data, site = _record((5, 7, 9), seed=6, duration=200.0)
+    with pytest.raises(ValueError, match=r"^keeping_solutions: runs: expected a number of runs >= 0 or None, "
+                                         r"found -1$"):
+        FactorGraphAligner(imu="navigation").keeping_solutions(-1)
     keeper = FactorGraphAligner(imu="navigation").keeping_solutions(1)
     keeper.align(data, site)
     assert len(keeper._solved[1]) == 1

@@ -1,13 +1,12 @@
 """Scenarios as data, the Monte Carlo runner's determinism, the report and the regression check."""
 
 import ctypes
-import ctypes.util
 import json
 
 import numpy as np
 import pytest
 
-from fusionbench.bench import memory, scenarios
+from fusionbench.bench import memory, runner as runner_mod, scenarios
 from fusionbench.bench.check import compare
 from fusionbench.bench.experiment import run_scenario, write_scenario_report
 
@@ -109,17 +108,23 @@ def test_default_batches_fit_the_memory_budget_and_share_the_workers(runs, n, st
     assert batches % jobs == 0 or batches == runs  # each worker as many batches, unless there are fewer runs
 
 
-@pytest.mark.skipif(not hasattr(ctypes.CDLL(ctypes.util.find_library("c") or None), "malloc_trim"),
-                    reason="no glibc malloc_trim here")
-def test_the_heap_a_unit_freed_goes_back_to_the_system():
+@pytest.mark.skipif(not memory.trims_heap(), reason="no glibc malloc_trim here")
+def test_the_heap_a_unit_freed_goes_back_to_the_system(monkeypatch, tmp_path):
     # 20 MB of small blocks from the C heap (what gtsam's factors are), freed: the pages stay in the process until
     # they are handed back, which malloc_trim reports
-    libc = ctypes.CDLL(ctypes.util.find_library("c"))
+    libc = ctypes.CDLL("libc.so.6")
     libc.malloc.restype, libc.free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
     blocks = [libc.malloc(1000) for _ in range(20000)]
     for b in blocks:
         libc.free(b)
     assert memory.release_freed_heap() is True
+    # and the runner hands it back after each method's batch, in this process as in a worker
+    calls = []
+    monkeypatch.setattr(runner_mod, "release_freed_heap", lambda: calls.append(1))
+    p = tmp_path / "tiny.toml"
+    p.write_text(TOML)
+    run_scenario(scenarios.load(p), methods=["coarse", "coarse-i0"], runs=2, seed=1, batch_size=1, progress=False)
+    assert len(calls) == 4  # 2 methods x 2 batches
 
 
 def test_metrics_follow_the_contract_and_the_report_is_written(tmp_path):

@@ -3,9 +3,8 @@ freed handed back to the system before the next (:func:`release_freed_heap`)."""
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import os
+import sys
 
 from fusionbench.bench import streaming
 
@@ -20,8 +19,9 @@ SAMPLE_BYTES = 200
 
 def default_batch_size(runs, n_samples, streamed, n_jobs):
     """Runs per batch when the caller gives none: as many as fit in :data:`BATCH_BYTES` at :data:`SAMPLE_BYTES` a
-    sample (at most :data:`fusionbench.bench.streaming.STREAM_BATCH_RUNS` on a ``streamed`` record), the batches
-    then evened out, their number a multiple of the workers (``n_jobs``, -1: the cores) so that each has as many.
+    sample (at most :data:`fusionbench.bench.streaming.STREAM_BATCH_RUNS` on a ``streamed`` record), then evened out
+    over the workers (``n_jobs``, -1: the cores): the batches of about the same size, at least one a worker when there
+    are runs enough, and as many a worker as the rounding to whole runs allows.
 
     Parameters
     ----------
@@ -35,6 +35,7 @@ def default_batch_size(runs, n_samples, streamed, n_jobs):
     Returns
     -------
     int
+        Runs per batch.
     """
     fit = int(max(1, min(runs, BATCH_BYTES // (max(n_samples, 1) * SAMPLE_BYTES))))
     if streamed:  # a streamed batch still holds its runs' whole histories
@@ -45,7 +46,28 @@ def default_batch_size(runs, n_samples, streamed, n_jobs):
     return -(-runs // batches)
 
 
-_libc = None  # the C library once loaded (False: none with malloc_trim)
+_trim = None  # glibc's malloc_trim once looked up (False: none here)
+
+
+def _malloc_trim():
+    """glibc's ``malloc_trim`` (size_t -> int), or None where there is none (macOS, musl, Windows)."""
+    global _trim
+    if _trim is None:
+        _trim = False
+        if sys.platform.startswith("linux"):
+            try:
+                import ctypes
+                for name in ("libc.so.6", None):  # glibc by its soname; else the symbols the process has
+                    try:
+                        trim = ctypes.CDLL(name).malloc_trim
+                    except (OSError, AttributeError, TypeError):
+                        continue
+                    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
+                    _trim = trim
+                    break
+            except ImportError:  # a Python built without ctypes
+                pass
+    return _trim or None
 
 
 def release_freed_heap() -> bool:
@@ -60,12 +82,10 @@ def release_freed_heap() -> bool:
     bool
         Whether memory was returned (False also where there is no ``malloc_trim``).
     """
-    global _libc
-    if _libc is None:
-        name = ctypes.util.find_library("c")
-        try:
-            _libc = ctypes.CDLL(name) if name else False
-        except OSError:
-            _libc = False
-    trim = getattr(_libc, "malloc_trim", None) if _libc else None
+    trim = _malloc_trim()
     return bool(trim(0)) if trim is not None else False
+
+
+def trims_heap() -> bool:
+    """Whether :func:`release_freed_heap` can return memory here (glibc's ``malloc_trim`` found)."""
+    return _malloc_trim() is not None

@@ -252,8 +252,8 @@ def _prefix_settling(method, data, aiding, init, traj, scn, phiu_end, limit_end,
     get NaN. A method with ``estimate_only()`` aligns the prefixes with that copy (the same attitudes without the
     uncertainty figures: gtsam's marginals); one with ``prefix_aligner(imu, site, aiding, init)`` with the copy that
     returns, which starts each prefix from the whole record's solution (the graphs): the one ``method`` kept when
-    it is the copy ``keeping_solutions()`` returned and aligned the record (:func:`_align_batch`), else one the
-    copy solves.
+    it is the copy ``keeping_solutions(n)`` returned (``n`` the batch's measured runs) and aligned the record
+    (:func:`_align_batch`), else one the copy solves.
 
     Returns ``(settle (R,) s, settled (R,) bool)``; ``settled`` (inside the band at the end) for every run."""
     band = scn.settling_band_arcmin * units.ARCMIN
@@ -300,9 +300,10 @@ def run_alignment(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     :func:`fusionbench.bench.experiment.run_scenario` runs any scenario).
 
     Parameters are :func:`fusionbench.bench.experiment.run_scenario`'s; here ``n_jobs`` are workers over batches (1,
-    or a single batch, runs in this process), ``batch_size`` defaults to :func:`fusionbench.bench.memory.default_batch_size`, and with
-    ``refusals`` a method that refuses the data (ValueError) is recorded in ``RunOutput.refused`` (name: message) and
-    left out of the metrics instead of stopping the run.
+    or a single batch, runs in this process), ``batch_size`` defaults to
+    :func:`fusionbench.bench.memory.default_batch_size`, and with ``refusals`` a method that refuses the data
+    (ValueError) is recorded in ``RunOutput.refused`` (name: message) and left out of the metrics instead of stopping
+    the run.
 
     Returns
     -------
