@@ -12,8 +12,7 @@ from fusionbench.bench import streaming
 BATCH_BYTES = 200e6
 #: Bytes per sample of one run in a batch: its IMU increments, reference rows and truth as simulated (5.3 MB a run
 #: of static-q-jump, 600 s at 100 Hz with a velocity row on every sample) and a method's arrays over them (up to
-#: 5.8 MB more in coarse-i0's fit on the rows). At 48 (the increments alone) such a batch held 25 runs per worker
-#: and its largest worker reached 655 MB.
+#: 5.8 MB more in coarse-i0's fit on the rows); benchmarks/README.md has the measurements.
 SAMPLE_BYTES = 200
 
 
@@ -75,7 +74,7 @@ def release_freed_heap() -> bool:
 
     gtsam's solves allocate many small C++ objects; once freed, their pages stay in the process (about 100 MB after a
     graph's record of 600 s at 100 Hz) and the next unit's arrays come on top of them. The runner calls this after
-    each method's batch (static-q-jump's largest worker: 563 -> 524 MB).
+    each method's batch.
 
     Returns
     -------
