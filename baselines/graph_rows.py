@@ -28,6 +28,8 @@ import gtsam
 
 from fusionbench.simulation.strapdown import rodrigues
 
+from .graph_compiled import interval_products, interval_starts
+
 
 def tiles(t, t_kf):
     """The keyframe nearest to each time (its *tile*): the record split at the midpoints between keyframes.
@@ -67,17 +69,11 @@ def tile_increments(phi, dv, counts, tile):
         ``C_{b_k}^{b_i}``.
     """
     M = phi.shape[0]
-    starts, lengths = counts[:-1], np.diff(counts)
-    R_start = np.empty((M, 3, 3))
-    Rcur = np.broadcast_to(np.eye(3), (starts.size, 3, 3)).copy()
-    for s in range(int(lengths.max())):
-        sel = lengths > s
-        idx = starts[sel] + s
-        R_start[idx] = Rcur[sel]
-        Rcur[sel] = Rcur[sel] @ rodrigues(phi[idx])
+    after = interval_products(phi, counts)
+    R_start = interval_starts(after, counts)
     interval = np.searchsorted(counts, np.arange(M), side="right") - 1  # sample i in [counts[j], counts[j+1])
     later = tile == interval + 1  # belongs to the keyframe at the end of its interval
-    R_start[later] = np.swapaxes(Rcur[interval[later]], -1, -2) @ R_start[later]
+    R_start[later] = np.swapaxes(after[counts[1:] - 1][interval[later]], -1, -2) @ R_start[later]
     return np.einsum("mij,mj->mi", R_start, dv), R_start
 
 

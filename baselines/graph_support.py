@@ -14,8 +14,10 @@ import numpy as np
 import gtsam
 from gtsam.symbol_shorthand import B, X
 
-from fusionbench.simulation.attitude import dcm_to_rotvec, orthonormalize, rotvec_to_dcm, skew
-from fusionbench.simulation.strapdown import coning_sculling, rodrigues
+from fusionbench.simulation.attitude import orthonormalize, rotvec_to_dcm
+from fusionbench.simulation.strapdown import coning_sculling
+
+from .graph_compiled import interval_products, interval_rates, interval_starts
 
 
 def compensated_increments(dtheta, dvel):
@@ -83,16 +85,15 @@ def _interval_rotations(phi, counts, u_kf):
     dR : ndarray, shape (K - 1, 3, 3)
         Body rotation over each interval (zero bias), C_b(end)^b(start).
     """
-    starts, lengths = counts[:-1], np.diff(counts)
-    Rcur = np.broadcast_to(np.eye(3), (starts.size, 3, 3)).copy()
-    u_b = None if u_kf is None else np.empty_like(phi)
-    for s in range(int(lengths.max())):
-        sel = lengths > s
-        idx = starts[sel] + s
-        if u_b is not None:
-            u_b[idx] = np.einsum("kji,kj->ki", Rcur[sel], u_kf[sel])
-        Rcur[sel] = Rcur[sel] @ rodrigues(phi[idx])
-    return u_b, Rcur
+    after = interval_products(phi, counts)
+    dR = after[counts[1:] - 1]
+    if u_kf is None:
+        return None, dR
+    u_b = np.empty_like(phi)
+    interval = np.repeat(np.arange(counts.size - 1), np.diff(counts))
+    start = interval_starts(after, counts)[counts[0]:counts[-1]]
+    u_b[counts[0]:counts[-1]] = np.einsum("kji,kj->ki", start, u_kf[interval])
+    return u_b, dR
 
 
 def tangent_rates(phi, counts, dt):
@@ -115,24 +116,7 @@ def tangent_rates(phi, counts, dt):
     dt : float
         Sample interval, s.
     """
-    starts, lengths = counts[:-1], np.diff(counts)
-    Rcur = np.broadcast_to(np.eye(3), (starts.size, 3, 3)).copy()
-    theta = np.zeros((starts.size, 3))
-    rates = np.asarray(phi, dtype=float) / dt
-    for s in range(int(lengths.max())):
-        sel = lengths > s
-        idx = starts[sel] + s
-        Rcur[sel] = Rcur[sel] @ rodrigues(phi[idx])
-        new = dcm_to_rotvec(Rcur[sel])
-        th = theta[sel]
-        a = np.linalg.norm(th, axis=-1)[:, None, None]
-        S = skew(th)
-        small = a < 1e-8
-        a = np.where(small, 1.0, a)
-        J_r = np.eye(3) + np.where(small, 0.0, -(1 - np.cos(a)) / a**2 * S + (a - np.sin(a)) / a**3 * (S @ S))
-        rates[idx] = np.einsum("kij,kj->ki", J_r, new - th) / dt
-        theta[sel] = new
-    return rates
+    return interval_rates(phi, counts, dt)
 
 
 def _propagate(C_known, dR, w_n, T, forward):

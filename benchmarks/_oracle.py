@@ -11,20 +11,30 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the repository: tests/ is not installed
 
 #: The oracles by what they stand in for: module names under ``tests/oracles``.
-ORACLES = ("strapdown", "coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td")
+ORACLES = ("strapdown", "coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td", "graph_rotations")
 
 
-def oracle_patch(name):
-    """``(module, attribute, oracle)`` of ``tests/oracles/<name>.py`` (its ``PATCH``)."""
+def oracle_patches(name):
+    """The ``(module, attribute, oracle)`` triples of ``tests/oracles/<name>.py`` (its ``PATCH``: one triple, or a
+    list of them where the oracle stands in for several functions)."""
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
-    return importlib.import_module(f"tests.oracles.{name}").PATCH
+    patch = importlib.import_module(f"tests.oracles.{name}").PATCH
+    return [patch] if isinstance(patch[0], str) else list(patch)
+
+
+def oracle_users(name):
+    """The modules whose methods run the kernels ``tests/oracles/<name>.py`` replaces: its ``USED_BY``, else the
+    modules it patches."""
+    patches = oracle_patches(name)  # puts the repository on the path
+    mod = importlib.import_module(f"tests.oracles.{name}")
+    return tuple(getattr(mod, "USED_BY", ())) or tuple(m for m, _, _ in patches)
 
 
 @contextlib.contextmanager
 def numpy_oracles(*names):
     """Within the block, the library calls the NumPy oracles ``names`` (default: all) instead of its kernels."""
-    patches = [oracle_patch(n) for n in names or ORACLES]
+    patches = [p for n in names or ORACLES for p in oracle_patches(n)]
     saved = []
     try:
         for mod, attr, fn in patches:

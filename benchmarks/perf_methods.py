@@ -28,7 +28,8 @@ Figures (wall times in s, measured with ``time.perf_counter``):
   and, at full size, only where the batched call took under ``--loop-limit`` s (20 by default).
 
 ``--numpy-oracles`` runs the methods whose loop is compiled (``coarse-i0``, ``adrc``, ``adrc-paper``, ``pid``,
-``eso-td``, ``eso-td-paper``) with the NumPy oracle of that loop (``tests/oracles/``: the operation-for-operation
+``eso-td``, ``eso-td-paper``, and the graphs' rotation loop in ``gtsam``, ``gtsam-robust``, ``gtsam-adaptive``) with
+the NumPy oracle of that loop (``tests/oracles/``: the operation-for-operation
 reference the tests hold the kernel to) in its place, so two invocations compare the compiled loop with the NumPy
 loop it replaced; the others run as registered (``oracle`` is recorded per method: null where none was used).
 
@@ -53,7 +54,7 @@ from fusionbench.simulation.imu import PRESETS, simulate
 from fusionbench.simulation.strapdown import NavState, Strapdown
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _oracle import oracle_patch, numpy_oracles  # noqa: E402 (the benchmarks' folder on the path)
+from _oracle import numpy_oracles, oracle_users  # noqa: E402 (the benchmarks' folder on the path)
 
 LAT, LON, H = np.radians(34.0), np.radians(108.0), 450.0
 DT = 0.01
@@ -93,13 +94,14 @@ def base_for(sup):
 
 
 #: The oracles of the methods' compiled loops (``tests/oracles/<name>.py``); the strapdown's is perf_core.py's.
-METHOD_ORACLES = ("coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td")
+METHOD_ORACLES = ("coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td", "graph_rotations")
 
 
 def oracle_for(cls):
-    """The name of the NumPy oracle that stands in for ``cls``'s compiled loop (its module calls the kernel the
-    oracle replaces), else None."""
-    return next((n for n in METHOD_ORACLES if oracle_patch(n)[0] == cls.__module__), None)
+    """The name of the NumPy oracle that stands in for ``cls``'s compiled loop (its module, or one it derives from, runs
+    the kernel the oracle replaces), else None."""
+    modules = {c.__module__ for c in cls.__mro__}
+    return next((n for n in METHOD_ORACLES if modules & set(oracle_users(n))), None)
 
 
 def timed_align(method, data, site):
