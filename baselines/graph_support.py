@@ -197,20 +197,27 @@ class Posterior:
     def _covariances(cls, lin):
         """The covariances of every conditional's clique of the linear graph ``lin``: ``{(a, b): block}``."""
         net = lin.eliminateSequential(gtsam.Ordering.ColamdGaussianFactorGraph(lin), gtsam.EliminateQR)
+        conds = [net.at(i) for i in range(net.size())]
+        # R is upper triangular, 3x3 or 6x6: inverted in one call per size (numpy's inverse costs more in its
+        # wrapper than in LAPACK; scipy's solve_triangular costs milliseconds a call when its threaded BLAS
+        # competes for the cores)
+        Rs = [c.R() for c in conds]
+        R_inv = [None] * len(Rs)
+        for d in {R.shape[0] for R in Rs}:
+            idx = [i for i, R in enumerate(Rs) if R.shape[0] == d]
+            for i, inv in zip(idx, np.linalg.inv(np.stack([Rs[i] for i in idx]))):
+                R_inv[i] = inv
         cov = {}
-        for i in range(net.size() - 1, -1, -1):
-            c = net.at(i)
+        for i in range(len(conds) - 1, -1, -1):
+            c = conds[i]
             keys = list(c.keys())
             f, parents = keys[0], keys[1:]
-            # R is upper triangular, 3x3 or 6x6: scipy's solve_triangular costs milliseconds per call when
-            # its threaded BLAS competes for the cores, numpy's inverse 0.03 ms
-            R_inv = np.linalg.inv(c.R())
             model = c.get_model()
             # the noise of R x_f + S x_P = d: unit, or the sigmas of a diagonal model left on it (by a
             # constrained factor); then cov(x_f | x_P) = R^-1 diag(sigma^2) R^-T
-            Ri = R_inv if model is None else R_inv * model.sigmas()[None, :]
+            Ri = R_inv[i] if model is None else R_inv[i] * model.sigmas()[None, :]
             if parents:
-                cls._condition(cov, f, parents, R_inv @ c.S(), Ri)
+                cls._condition(cov, f, parents, R_inv[i] @ c.S(), Ri)
             else:
                 cov[f, f] = Ri @ Ri.T
         return cov
