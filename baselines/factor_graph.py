@@ -85,10 +85,16 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         Levenberg-Marquardt iteration limit. When it is reached from a given ``init``, the
         recording is solved again from the coarse alignment and the solution of lower cost kept.
     recompensate_rad : float
-        Rebuild the graph when the optimised attitude moved by more than this (rad) from the one at
-        which the velocity factors were linearised and, on a moving base, the transport rate
-        compensated (the preintegration is redone only where the compensation matters: angle moved
-        times compensation above 1e-9 m/s^2).
+        Retake the rows' lever-arm terms and the turn of ENU, and on a moving base recompensate the transport rate
+        (the preintegration is redone only where the compensation matters: angle moved times compensation above
+        1e-9 m/s^2), when the optimised attitude moved by more than this (rad) since they were taken; the default
+        of ``relinearize_rad``.
+    relinearize_rad : float, optional
+        Rebuild the graph, its row factors linearised at the solution, until the attitude moves by less than this
+        (rad) between builds; default ``recompensate_rad``. Where the heading is barely observable (a tactical
+        gyro at high latitude) the answer depends on where the last linearisation was, by arcminutes; 3e-6 (0.01
+        arcmin) with ``max_passes=30`` lands on the minimum of the rows' own nonlinear factors, whatever the start
+        (docs/methods/gtsam.md, "Passes").
     max_passes : int
         At most this many graph builds per recording (the robust variant: at least 10, for its
         reweighting).
@@ -139,13 +145,16 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
     def __init__(self, step_s=1.0, imu="navigation", gyro_noise=None, accel_noise=None, gyro_bias_sigma=None,
                  accel_bias_sigma=None, vref_sigma=0.01, position_sigma=1.0, integration_sigma=1e-6,
                  bias_interval_s=None, max_iterations=100, recompensate_rad=1e-3, max_passes=3, marginals=True,
-                 huber_k=1.345, coarse=None, init_sigma_deg=None, aiding_position_sigma=POSITION_SIGMA):
+                 huber_k=1.345, coarse=None, init_sigma_deg=None, aiding_position_sigma=POSITION_SIGMA,
+                 relinearize_rad=None):
         if not (isinstance(vref_sigma, (int, float)) and np.isfinite(vref_sigma) and vref_sigma >= 0):
             raise ValueError(f"vref_sigma: expected a non-negative standard deviation in m/s, found {vref_sigma!r}")
         vref_sigma = max(float(vref_sigma), VREF_SIGMA_FLOOR)  # an exact reference: a well-conditioned factor
         positive = dict(step_s=step_s, vref_sigma=vref_sigma, position_sigma=position_sigma,
                         aiding_position_sigma=aiding_position_sigma,
-                        integration_sigma=integration_sigma, recompensate_rad=recompensate_rad, huber_k=huber_k,
+                        integration_sigma=integration_sigma, recompensate_rad=recompensate_rad,
+                        relinearize_rad=recompensate_rad if relinearize_rad is None else relinearize_rad,
+                        huber_k=huber_k,
                         bias_interval_s=30.0 if bias_interval_s is None else bias_interval_s)
         for key, val in positive.items():
             setattr(self, key, self._positive(key, val))

@@ -21,6 +21,11 @@ from .graph_build import GraphBuilder
 from .graph_rows import Intervals
 
 
+def _moved(C, C_ref):
+    """The largest rotation, rad, between the keyframe attitudes ``C`` and ``C_ref`` (K, 3, 3)."""
+    return np.abs(dcm_to_rotvec(C @ np.swapaxes(C_ref, -1, -2))).max()
+
+
 def _prefix_runs(solved, imu):
     """The solutions of ``solved = (record, runs)`` when ``imu`` is a prefix of that record (its first samples of
     its first runs); else None."""
@@ -35,9 +40,16 @@ def _prefix_runs(solved, imu):
     return runs
 
 
+#: Levenberg-Marquardt's tolerance on the decrease of the cost (relative and absolute) for the solution a recording
+#: ends with, and for a pass whose graph is rebuilt at its solution unless it hardly moved (docs/methods/gtsam.md,
+#: "Where a solve's time goes").
+FINAL_TOL, PASS_TOL = 1e-10, 1e-6
+
+
 class GraphSolver(GraphBuilder):
     """Solves the graph of one recording (:class:`GraphBuilder`) for
-    :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``),
+    :class:`baselines.factor_graph.FactorGraphAligner` (``max_iterations``, ``max_passes``, ``recompensate_rad``,
+    ``relinearize_rad``),
     and its record's prefixes from the whole record's solution (:meth:`prefix_aligner`)."""
 
     #: The record a prefix aligner solved and each run's ``(counts, values, pims, gyro rates)`` (:meth:`prefix_aligner`).
@@ -118,11 +130,13 @@ class GraphSolver(GraphBuilder):
         same = K <= counts_all.size and np.array_equal(counts, counts_all[:K])
         return C_kf, values, (Intervals(pims_all[:K - 1]) if same else None)
 
-    def _optimize(self, graph, values):
+    def _optimize(self, graph, values, tol=FINAL_TOL):
+        """Levenberg-Marquardt from ``values`` until the cost decreases by less than ``tol``, relative or absolute;
+        the solution and the iterations."""
         lm = gtsam.LevenbergMarquardtParams()
         lm.setLinearSolverType("MULTIFRONTAL_QR")
-        lm.setRelativeErrorTol(1e-10)
-        lm.setAbsoluteErrorTol(1e-10)
+        lm.setRelativeErrorTol(tol)
+        lm.setAbsoluteErrorTol(tol)
         lm.setMaxIterations(self.max_iterations)
         opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm)
         return opt.optimize(), opt.iterations()
@@ -131,11 +145,11 @@ class GraphSolver(GraphBuilder):
         """Optimise one recording from keyframe attitudes ``C_kf`` (K, 3, 3) (or from ``values``).
 
         Returns ``(graph, values, C_kf, iterations, passes, converged, imu_idx, vel_idx, pims, data, pos_idx)``.
-        The tile factors are linearised at the current solution (their lever-arm terms and the turn of ENU taken
-        with its attitude) and, on a moving base, the preintegration compensated for the transport rate with its
-        attitude; the graph is rebuilt there until the attitude moves by less than ``recompensate_rad`` (and, in
-        the robust variant, the Huber weights settle). ``pims``: intervals already preintegrated with an attitude
-        within ``recompensate_rad`` of ``C_kf``.
+        The tile factors are linearised at the current solution and the graph rebuilt there until a pass moves
+        the attitude by less than ``relinearize_rad`` (and, in the robust variant, the Huber weights settle); their
+        lever-arm terms and the turn of ENU, and on a moving base the preintegration's compensation for the
+        transport rate, are retaken when the attitude moved by more than ``recompensate_rad`` since they were
+        taken. ``pims``: intervals already preintegrated with an attitude within ``recompensate_rad`` of ``C_kf``.
         """
         counts, seg, walk = problem["counts"], problem["seg"], problem["walk"]
         K = counts.size
@@ -153,32 +167,41 @@ class GraphSolver(GraphBuilder):
             for j in range(int(seg.max()) + 1):
                 values.insert(B(j), gtsam.imuBias.ConstantBias())
         states = keyframe_states(values, K, seg)  # of the current values: the graph's linearisation point
-        iterations, converged, moved = 0, True, 0.0
+        iterations, converged = 0, True
         huber = None  # the Huber weights need the intervals' covariance (the tiles' IMU share): first pass below
         c_max = np.abs(problem["c_n"]).max()
+        C_data = C_pims = C_kf  # the attitudes the rows' terms and the compensation were taken with
         passes = max(self.max_passes, 10) if self.robust else self.max_passes
         for n_pass in range(1, passes + 1):
+            if pims is not None and c_max > 0:
+                turned = _moved(C_kf, C_pims)
+                if turned > self.recompensate_rad and turned * c_max > 1e-9:  # the compensation matters
+                    pims = None
             if pims is None:
-                pims = self._preintegrate(problem, C_kf)
-            if n_pass > 1 and moved > self.recompensate_rad:  # the lever arm and the turn of ENU at the new attitude
-                data = tile_data(problem, C_kf)
+                pims, C_pims = self._preintegrate(problem, C_kf), C_kf
+            if _moved(C_kf, C_data) > self.recompensate_rad:  # the lever arm and the turn of ENU at the new attitude
+                data, C_data = tile_data(problem, C_kf), C_kf
             if huber is None:
                 huber = self._huber_weights(problem, data, states, pims, imu_scale)
             graph, imu_idx, idx = self._graph(pims, data, problem, seg, walk, values, imu_scale, huber, states)
-            values, n_it = self._optimize(graph, values)
-            iterations += n_it
-            converged = converged and n_it < self.max_iterations  # a pass stopped at the limit may have stalled
-            states = keyframe_states(values, K, seg)
-            C_new = states[0]
-            moved = np.abs(dcm_to_rotvec(C_new @ np.swapaxes(C_kf, -1, -2))).max()
-            C_kf = C_new
-            new_huber = self._huber_weights(problem, data, states, pims, imu_scale)
-            settled = max(np.abs(new_huber[g] - huber[g]).max() for g in huber) <= 1e-3
+            # a pass whose graph may be rebuilt at its solution stops at PASS_TOL; once its linearisation holds
+            # there (and the Huber weights settled), the same graph goes on to the solver's tolerance
+            tol = FINAL_TOL if n_pass == passes else PASS_TOL
+            while True:
+                values, n_it = self._optimize(graph, values, tol)
+                iterations += n_it
+                converged = converged and n_it < self.max_iterations  # a pass stopped at the limit may have stalled
+                states = keyframe_states(values, K, seg)
+                moved = _moved(states[0], C_kf)
+                new_huber = self._huber_weights(problem, data, states, pims, imu_scale)
+                settled = max(np.abs(new_huber[g] - huber[g]).max() for g in huber) <= 1e-3
+                if tol == FINAL_TOL or moved > self.relinearize_rad or not settled:
+                    break
+                tol = FINAL_TOL
+            C_kf = states[0]
             huber = new_huber
-            if moved <= self.recompensate_rad and settled:
+            if moved <= self.relinearize_rad and settled:
                 break
-            if moved > self.recompensate_rad and moved * c_max > 1e-9:  # the compensation matters
-                pims = None
         return graph, values, C_kf, iterations, n_pass, converged, imu_idx, idx["v"], pims, data, idx["p"]
 
     def _refine(self, problem, sol):
