@@ -42,7 +42,7 @@ def _prefix_runs(solved, imu):
 
 #: Levenberg-Marquardt's tolerance on the decrease of the cost (relative and absolute) for the solution a recording
 #: ends with, and for a pass whose graph is rebuilt at its solution unless it hardly moved (docs/methods/gtsam.md,
-#: "Where a solve's time goes").
+#: "Passes").
 FINAL_TOL, PASS_TOL = 1e-10, 1e-6
 
 

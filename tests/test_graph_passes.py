@@ -18,6 +18,10 @@ from fusionbench.simulation.imu import PRESETS, simulate
 
 D = np.pi / 180
 LAT = 60 * D
+#: How far two solves of one record may end apart, arcmin: each stops once a pass moves by less than 3e-6 rad, which
+#: leaves it up to 3e-6 rho / (1 - rho) from the fixed point, 1.2e-5 rad (0.04 arcmin) where the passes contract by
+#: rho = 0.8, as on this record's heading; the default's answers from different starts end 0.29 arcmin apart
+TOL_ARCMIN = 0.05
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +47,8 @@ def test_the_solution_does_not_depend_on_where_the_solve_starts(flat):
     graph = FactorGraphAligner(imu="tactical", marginals=False, relinearize_rad=3e-6, max_passes=30)
     got = {k: graph.align(data, site, init=None if C is None else np.broadcast_to(C, (2, 3, 3))).C_bn[:, -1]
            for k, C in starts.items()}
-    for k in ("+2 deg", "-3 deg"):
-        assert _arcmin(got[k], got["coarse"]).max() < 0.02, k
+    for k in ("+2 deg", "-3 deg"):  # 0.005 to 0.008 measured
+        assert _arcmin(got[k], got["coarse"]).max() < TOL_ARCMIN, k
     # relinearised only until the attitude moves by less than recompensate_rad (3.4 arcmin, the default) the answer
     # is where the last linearisation happened to be: 0.29 arcmin apart on this record, up to 100 on the conformance
     # cell's runs (docs/methods/gtsam.md, "Passes")
@@ -67,4 +71,4 @@ def test_passes_stopped_early_land_where_passes_solved_to_the_end_do(flat, monke
     assert np.all(early["flat, to the minimum"].extra["passes"] > 3)  # the heading needs many relinearisations here
     monkeypatch.setattr(graph_solve, "PASS_TOL", graph_solve.FINAL_TOL)
     for k, (d, g) in cases.items():
-        assert _arcmin(early[k].C_bn, g.align(d, site).C_bn).max() < 0.02, k
+        assert _arcmin(early[k].C_bn, g.align(d, site).C_bn).max() < TOL_ARCMIN, k  # flat: 0.017 measured
