@@ -8,7 +8,7 @@ Levenberg-Marquardt: a smoother, every keyframe's estimate from the whole record
 
 Built from :mod:`baselines.graph_model` (the figures), :mod:`baselines.graph_build` (the graph),
 :mod:`baselines.graph_solve` (its solve), :mod:`baselines.graph_rows` and :mod:`baselines.graph_aiding` (the rows),
-:mod:`baselines.graph_support` (increments, marginals). The design, its conventions and what was measured to decide it:
+:mod:`baselines.graph_support` (increments), :mod:`baselines.graph_posterior` (marginals). The design, its conventions and what was measured to decide it:
 ``docs/methods/gtsam.md``.
 """
 
@@ -32,7 +32,8 @@ from fusionbench.methods.coarse import InertialCoarseAligner
 from .graph_aiding import POSITION_SIGMA, build_problem, keyframe_states, motion_from_solution, recording_rows
 from .graph_model import VREF_SIGMA_FLOOR, _scalar_or_axes, noise_model
 from .graph_solve import GraphSolver
-from .graph_support import _interval_rotations, _propagate, keyframe_counts, marginal_sigmas
+from .graph_posterior import marginal_sigmas
+from .graph_support import _interval_rotations, _propagate, keyframe_counts
 
 __all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "noise_model"]
 

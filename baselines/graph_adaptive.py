@@ -12,7 +12,7 @@ from gtsam.symbol_shorthand import B, V, X
 
 from .factor_graph import FactorGraphAligner
 from .graph_aiding import keyframe_states, row_scatter
-from .graph_support import Posterior, residual_statistics
+from .graph_posterior import Posterior, residual_statistics
 
 __all__ = ["AdaptiveFactorGraphAligner"]
 
@@ -27,7 +27,7 @@ class AdaptiveFactorGraphAligner(FactorGraphAligner):
     the velocity rows, ``lambda_p`` of the position rows and ``lambda_i`` of the preintegrated IMU noise
     (gyro and accelerometer together). From a solution, for each group, ``lambda = (nu + sum(lambda_old b^T b)) / (nu +
     sum(r))`` over the window, with the whitened residuals ``b`` and redundancy numbers ``r`` of
-    its factors (:func:`baselines.graph_support.residual_statistics`) and, for the rows, their
+    its factors (:func:`baselines.graph_posterior.residual_statistics`) and, for the rows, their
     scatter about the velocity or position predicted at their times (``n - 2`` degrees of freedom per
     tile and axis). A window with less than ``adapt_min_dof`` of redundancy pools its
     neighbours, up to ``adapt_smooth`` either side; ``nu = adapt_prior_dof`` pseudo-degrees of

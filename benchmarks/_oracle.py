@@ -11,7 +11,8 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the repository: tests/ is not installed
 
 #: The oracles by what they stand in for: module names under ``tests/oracles``.
-ORACLES = ("strapdown", "coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td", "graph_rotations")
+ORACLES = ("strapdown", "coarse", "adrc_gyrocompass", "pid_gyrocompass", "eso_td", "graph_rotations",
+           "graph_posterior")
 
 
 def oracle_patches(name):

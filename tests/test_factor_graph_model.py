@@ -12,7 +12,7 @@ from gtsam.symbol_shorthand import B, V, X
 from baselines.factor_graph import FactorGraphAligner, noise_model
 from baselines.graph_adaptive import AdaptiveFactorGraphAligner
 from baselines.graph_rows import axis_means, tile_error, tile_factors, tile_sums, tiles
-from baselines.graph_support import Posterior
+from baselines.graph_posterior import Posterior
 from baselines.kalman import KalmanAligner
 from fusionbench.bench import scenarios
 from fusionbench.methods.aligner import Site
