@@ -27,7 +27,8 @@ and the data of the tile factors (:mod:`baselines.graph_rows`) at the rows' time
 from __future__ import annotations
 
 import numpy as np
-from gtsam.symbol_shorthand import B, V, X
+import gtsam
+from gtsam.symbol_shorthand import B
 
 from fusionbench.simulation import earth
 from fusionbench.simulation.aiding_geometry import bracket, enu_offset, lever_offset, lever_velocity
@@ -325,7 +326,12 @@ def path_offsets(v, p0, dt, site):
 def keyframe_states(values, K, seg):
     """The keyframes' attitudes ``C_bn`` (K, 3, 3), positions (K, 3) m, velocities (K, 3) m/s and accelerometer
     biases (K, 3) m/s^2 in a solution (``gtsam.Values``; ``seg`` (K-1,) the bias key of each interval)."""
-    poses = [values.atPose3(X(k)) for k in range(K)]
-    return (np.stack([p.rotation().matrix() for p in poses]), np.stack([p.translation() for p in poses]),
-            np.stack([values.atVector(V(k)) for k in range(K)]),
-            np.stack([values.atConstantBias(B(seg[min(k, K - 2)])).accelerometer() for k in range(K)]))
+    poses = gtsam.utilities.extractPose3(values)  # (K, 12): every Pose3 in key order, R row-major then t
+    vel = gtsam.utilities.extractVectors(values, "v")
+    if poses.shape[0] != K or vel.shape[0] != K:
+        raise ValueError(f"keyframe_states: expected {K} poses and velocities, found {poses.shape[0]} and "
+                         f"{vel.shape[0]}")
+    seg = np.asarray(seg)
+    b_acc = np.stack([values.atConstantBias(B(j)).accelerometer() for j in range(int(seg.max()) + 1)])
+    return (poses[:, :9].reshape(K, 3, 3).copy(), poses[:, 9:].copy(), vel,
+            b_acc[seg[np.minimum(np.arange(K), K - 2)]])
