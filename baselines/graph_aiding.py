@@ -195,6 +195,12 @@ def build_problem(rows, site, t_end, t_kf, counts, dt, dtheta, dvel, C0=None, di
                 g["Rr"] = row_rotations(R_start, phi, j, w)
             if name == "pos":
                 g["dtk"] = g["t"] - t_kf[g["tile"]]
+                g["U_rows"] = integral_at_rows(out["U"], u, j, w, dt, tile, counts)
+                if lever:
+                    g["U_rows"] += lever_offset(g["Rr"], rows["lever_arm"])
+                g["Mb_rows"] = integral_at_rows(out["Mb"], mb, j, w, dt, tile, counts)
+            else:
+                g["U_rows"], g["Mb_rows"] = at_rows(out["U"], u, j, w), at_rows(out["Mb"], mb, j, w)
         out[name] = g
     source = rows["vel"]
     if differenced is not None and (source is None or not source["lever"].any()):  # no velocity of a moving base
@@ -234,14 +240,14 @@ def tile_data(problem, C_kf):
     if g is not None:
         j, w = g["j"], g["w"]
         y = g["z"] - at_rows(G, x, j, w)
-        U = at_rows(pr["U"], pr["u"], j, w)
+        U = g["U_rows"].copy()
         if "Rr" in g and g["lever"].any():
             m = g["lever"]
             Rr = g["Rr"][m]
             C_row = C_kf[g["tile"][m]] @ Rr
             w_nb = mean_at_rows(pr["phi"] / dt, j[m], w[m]) - np.einsum("nji,nj->ni", C_row, pr["w_s"][j[m]])
             U[m] += lever_velocity(Rr, w_nb, l)
-        Mb = at_rows(pr["Mb"], pr["mb"], j, w)
+        Mb = g["Mb_rows"]
         W = g["W"] * g["scale"][:, None]
         var, (z, Ub, Mbb) = axis_means(g["tile"], K, W, per_axis=[y], shared=[U, Mb])
         out["v"] = {"z": z, "U": Ub, "Mb": Mbb, "c_v": np.ones((K, 3)), "position": False, "var": var, "y": y,
@@ -250,10 +256,7 @@ def tile_data(problem, C_kf):
     if g is not None:
         j, w, tl, cnt = g["j"], g["w"], pr["tile"], pr["counts"]
         y = g["z"] + g["dz"] - integral_at_rows(G, x, j, w, dt, tl, cnt)
-        U = integral_at_rows(pr["U"], pr["u"], j, w, dt, tl, cnt)
-        if "Rr" in g:
-            U += lever_offset(g["Rr"], l)
-        Mb = integral_at_rows(pr["Mb"], pr["mb"], j, w, dt, tl, cnt)
+        U, Mb = g["U_rows"], g["Mb_rows"]
         W = g["W"] * g["scale"][:, None]
         var, (z, c_v, Ub, Mbb) = axis_means(g["tile"], K, W, per_axis=[y, np.repeat(g["dtk"][:, None], 3, 1)],
                                             shared=[U, Mb])
