@@ -173,7 +173,9 @@ def build_problem(rows, site, t_end, t_kf, counts, dt, dtheta, dvel, C0=None, di
         their start), ``U`` (M, 3) m/s and ``Mb`` (M, 3, 3) s the sums of ``u`` and of ``mb = R_start dt`` from the
         keyframe to each sample's end, ``tau`` (M,) each sample's start less its keyframe's time; ``vel``, ``pos``
         the rows with their samples ``j``, fractions ``w``, tiles ``tile``, rotations ``Rr`` (n, 3, 3) (with a lever
-        arm) and adaptive ``scale`` (n,) (1); the compensation (:func:`motion`); ``v_kf`` (K, 3) the reference
+        arm), ``U_rows`` (n, 3) and ``Mb_rows`` (n, 3, 3): ``U`` and ``Mb`` at the rows' times (velocity rows, m/s and
+        s) or their integrals from the keyframe (position rows, m and s^2, with the lever arm's offset), and adaptive
+        ``scale`` (n,) (1); the compensation (:func:`motion`); ``v_kf`` (K, 3) the reference
         velocity at the keyframes; ``refine_motion`` whether the compensation is to be redone from the solution
         (rows of a moving base elsewhere than at every increment end).
     """
