@@ -165,7 +165,7 @@ def joint_covariance(net, cov, pos):
     pos = np.asarray(pos, dtype=np.int64)
     n = int(net[0][pos].sum())
     P = np.empty((n, n))
-    _joint(pos, *net[:5], net[5], net[6], *cov, P)
+    _joint(pos, *net, *cov, P)
     return P
 
 
