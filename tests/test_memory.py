@@ -1,7 +1,9 @@
 """The Monte Carlo's memory (fusionbench.bench.memory): the default batches' size and the freed heap handed back."""
 
 import ctypes
+import os
 
+import joblib
 import pytest
 
 from fusionbench.bench import memory, runner, scenarios
@@ -45,3 +47,17 @@ def test_the_runner_hands_the_heap_back_after_each_methods_batch(monkeypatch):
     run_scenario(scenarios.get("static-34n"), methods=["coarse", "coarse-i0"], runs=2, seed=1, quick=True,
                  batch_size=1, progress=False)
     assert len(calls) == 4  # 2 methods x 2 batches
+
+
+def test_all_cores_means_the_cores_this_process_may_use(monkeypatch):
+    # n_jobs=-1 is as many workers as joblib starts: the cores the process is allowed (affinity, a container's
+    # quota), not the machine's; a machine of 64 cores whose process may use fewer gets the batches of those few
+    allowed = joblib.effective_n_jobs(-1)
+    expected = memory.default_batch_size(50, 60000, False, allowed)
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    assert joblib.effective_n_jobs(-1) == allowed
+    assert memory.default_batch_size(50, 60000, False, -1) == expected
+    assert memory.default_batch_size(50, 60000, False, 64) != expected  # what -1 meant when it read the machine's
+    if allowed > 1:  # -2: all but one
+        assert memory.default_batch_size(50, 60000, False, -2) == memory.default_batch_size(50, 60000, False,
+                                                                                             allowed - 1)

@@ -3,8 +3,9 @@ freed handed back to the system before the next (:func:`release_freed_heap`)."""
 
 from __future__ import annotations
 
-import os
 import sys
+
+import joblib
 
 from fusionbench.bench import streaming
 
@@ -29,7 +30,8 @@ def default_batch_size(runs, n_samples, streamed, n_jobs):
     streamed : bool
         Whether the record goes to the methods as a stream of chunks.
     n_jobs : int
-        Workers.
+        Workers, as joblib counts them (-1: every core this process may run on, -2: all but one, ...; on a
+        Dask cluster its workers).
 
     Returns
     -------
@@ -39,7 +41,7 @@ def default_batch_size(runs, n_samples, streamed, n_jobs):
     fit = int(max(1, min(runs, BATCH_BYTES // (max(n_samples, 1) * SAMPLE_BYTES))))
     if streamed:  # a streamed batch still holds its runs' whole histories
         fit = min(fit, streaming.STREAM_BATCH_RUNS)
-    workers = 1 if n_jobs == 1 else ((os.cpu_count() or 1) if n_jobs < 0 else n_jobs)
+    workers = 1 if n_jobs == 1 else joblib.effective_n_jobs(n_jobs)  # the cores allowed, not the machine's
     batches = -(-runs // fit)
     batches = min(runs, -(-batches // workers) * workers)
     return -(-runs // batches)
