@@ -123,10 +123,15 @@ def test_a_wrong_heading_fails_its_cell(mini):
 
 def test_same_figures_whatever_the_worker_count(mini):
     matrix, out = mini
-    two = run_scenario(matrix, methods=["coarse"], seed=4, n_jobs=2, progress=False)
-    for cond, cell in two.metrics["cells"]["coarse"].items():
-        assert cell.get("efficiency_U") == out.metrics["cells"]["coarse"][cond].get("efficiency_U")
-        assert cell["status"] == out.metrics["cells"]["coarse"][cond]["status"]
+    two = run_scenario(matrix, seed=4, n_jobs=2, progress=False)
+    for name, cells in two.metrics["cells"].items():
+        for cond, cell in cells.items():
+            assert cell.get("efficiency_U") == out.metrics["cells"][name][cond].get("efficiency_U")
+            assert cell["status"] == out.metrics["cells"][name][cond]["status"]
+    # the conditions' bounds, bands and limits (the sway's bias limit too), which the workers take with their runs
+    assert two.metrics["conditions"] == out.metrics["conditions"]
+    assert list(two.metrics["conditions"]["sway-nav"]) == list(out.metrics["conditions"]["sway-nav"])  # key order
+    assert "bias_limit_level_arcmin" in two.metrics["conditions"]["sway-nav"]
 
 
 def test_check_guards_the_cells(mini):

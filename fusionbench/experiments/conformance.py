@@ -67,7 +67,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     ``methods`` defaults to the file's list, else every registered aligner; ``runs`` to the file's size.
     Same seed, same numbers whatever ``n_jobs``.
     """
-    from fusionbench.bench.runner import run_alignment, scenario_limits
+    from fusionbench.bench.runner import scenario_limits
 
     names = list(methods or matrix.methods or aligner_names())
     duration, default_runs = matrix.sized(quick)
@@ -80,10 +80,6 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     todo = []
     for cond in matrix.conditions:
         scn = condition_scenario(matrix, cond, quick)
-        bound = condition_bound(scn, cond, duration)
-        sway_limit = sway_level_limit(scn, cond, duration)
-        band = max(matrix.settling_band_arcmin, 3.0 * bound[2] / units.ARCMIN)
-        scn = condition_scenario(matrix, cond, quick, band_arcmin=band)
         ratio = azimuth_bias_ratio(scn.imu_spec, np.radians(cond.lat_deg))
         claim = cond.aiding_claim(matrix.rate_hz)
         covered = {n for n in names
@@ -93,7 +89,7 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
                                  "imu": scn.imu_spec.name, "vref_sigma_mps": cond.vref_sigma_mps, "expect": cond.expect,
                                  "init_error_deg": cond.init_error_deg,
                                  "gyro_bias_ratio": float(ratio),
-                                 "bound_arcmin": _axes(bound / units.ARCMIN), "settling_band_arcmin": band}
+                                 "bound_arcmin": None, "settling_band_arcmin": None}  # the worker's (below)
         if cond.receiver:
             conditions[cond.name]["aiding"] = {"kinds": cond.aiding, "rate_hz": claim["aiding_hz"],
                                                "position_sigma_m": cond.position_sigma_m,
@@ -103,25 +99,27 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
             if n not in claimed:
                 cells[n][cond.name] = {"status": "not claimed"}
         if claimed:
-            todo.append((cond, scn, claimed, (bound, sway_limit)))
-        else:  # no method claims it: its limit all the same, for the table
+            todo.append((cond, claimed, covered))
+        else:  # no method claims it: its bound and limit all the same, for the table
+            bound, _, band, scn = _condition_figures(matrix, cond, quick, duration)
+            conditions[cond.name].update(bound_arcmin=_axes(bound / units.ARCMIN), settling_band_arcmin=band)
             traj = scn.trajectory(duration)
             conditions[cond.name]["limit_arcmin"] = _axes(scenario_limits(scn, traj, [duration],
                                                                   traj.truth([duration]).C_bn)[0] / units.ARCMIN)
     # one condition per worker, all its runs in one batch (the batched filters vectorize over runs); the same
-    # numbers as any other split, since run k of a seed does not depend on the batching
-    run = delayed(run_alignment)
-    jobs = (run(scn, methods=claimed, runs=runs, seed=seed, quick=quick, n_jobs=1, progress=False, refusals=True)
-            for _, scn, claimed, _ in todo)
+    # numbers as any other split, since run k of a seed does not depend on the batching. Each worker takes its
+    # condition's bound and limits too, so that a moving base's (an ODE solve of the path) is taken once, in parallel
+    jobs = (delayed(_run_condition)(matrix, cond, quick, duration, claimed, runs, seed) for cond, claimed, _ in todo)
     pbar = progress_bar(progress, runs * len(todo), matrix.name)
     results = []
     for out in Parallel(n_jobs=n_jobs, return_as="generator")(jobs):  # conditions in order, as they finish
         results.append(out)
         pbar.update(runs)
     pbar.close()
-    for (cond, _, claimed, (bound, sway_limit)), out in zip(todo, results):
+    for (cond, claimed, covered), (bound, sway_limit, band, out) in zip(todo, results):
         outputs[cond.name] = out
-        conditions[cond.name]["limit_arcmin"] = _axes(out.limits / units.ARCMIN)
+        conditions[cond.name].update(bound_arcmin=_axes(bound / units.ARCMIN), settling_band_arcmin=band,
+                                     limit_arcmin=_axes(out.limits / units.ARCMIN))
         if sway_limit is not None:
             conditions[cond.name]["bias_limit_level_arcmin"] = _axes(sway_limit[0] / units.ARCMIN, "EN")
             conditions[cond.name]["bias_limit_level_sigma_arcmin"] = _axes(sway_limit[1] / units.ARCMIN, "EN")
@@ -130,6 +128,28 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
             if n not in covered:  # run by the file's choice (run_unclaimed): scored, and marked outside the claim
                 cells[n][cond.name]["claimed"] = False
     return MatrixOutput(matrix, _metrics(matrix, names, conditions, cells, outputs, runs, seed, quick, duration), outputs)
+
+
+def _condition_figures(matrix, cond, quick, duration):
+    """A condition's bound (3,) rad (:func:`condition_bound`), its sway's level limit (:func:`sway_level_limit`),
+    its settling band, arcmin (the file's, or three times the azimuth bound when that is wider), and its scenario
+    with that band."""
+    scn = condition_scenario(matrix, cond, quick)
+    bound = condition_bound(scn, cond, duration)
+    sway_limit = sway_level_limit(scn, cond, duration)
+    band = max(matrix.settling_band_arcmin, 3.0 * bound[2] / units.ARCMIN)
+    return bound, sway_limit, band, condition_scenario(matrix, cond, quick, band_arcmin=band)
+
+
+def _run_condition(matrix, cond, quick, duration, methods, runs, seed):
+    """One condition's figures (:func:`_condition_figures`, the scenario left out) and its Monte Carlo of
+    ``methods`` (:func:`fusionbench.bench.runner.run_alignment`, refusals recorded), in one worker."""
+    from fusionbench.bench.runner import run_alignment
+
+    bound, sway_limit, band, scn = _condition_figures(matrix, cond, quick, duration)
+    out = run_alignment(scn, methods=methods, runs=runs, seed=seed, quick=quick, n_jobs=1, progress=False,
+                        refusals=True)
+    return bound, sway_limit, band, out
 
 
 def _axes(v, keys="ENU"):
