@@ -2,6 +2,8 @@
 
 import ctypes
 import os
+import subprocess
+import sys
 
 import joblib
 import pytest
@@ -61,3 +63,41 @@ def test_all_cores_means_the_cores_this_process_may_use(monkeypatch):
     if allowed > 1:  # -2: all but one
         assert memory.default_batch_size(50, 60000, False, -2) == memory.default_batch_size(50, 60000, False,
                                                                                              allowed - 1)
+
+
+# a block of 20 MB freed, then one of 8 MB: where does the second come from? The program break (the heap's end) moves
+# when it comes from the heap; a mapped block leaves it where it was
+_BREAK_PROBE = """
+import ctypes, sys
+from fusionbench.bench import memory
+if sys.argv[1] == "pinned":
+    assert memory.pin_mmap_threshold()
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+libc.free.argtypes, libc.sbrk.restype, libc.sbrk.argtypes = [ctypes.c_void_p], ctypes.c_void_p, [ctypes.c_long]
+libc.free(libc.malloc(20 * 2**20))
+before = libc.sbrk(0)
+block = libc.malloc(8 * 2**20)
+print(libc.sbrk(0) - before)
+"""
+
+
+@pytest.mark.skipif(not memory.trims_heap(), reason="the mmap threshold is glibc's (Linux with glibc)")
+@pytest.mark.parametrize("mode", ["dynamic", "pinned"])
+def test_a_large_block_is_mapped_apart_even_after_a_larger_one_was_freed(mode):
+    # glibc's own rule raises the threshold to the 20 MB freed, so the 8 MB come from the heap (the break moves by
+    # most of them); pinned at 4 MiB they are mapped apart and go back to the system when freed
+    out = subprocess.run([sys.executable, "-c", _BREAK_PROBE, mode], capture_output=True, text=True, check=True)
+    grown = int(out.stdout)
+    if mode == "pinned":
+        assert memory.MMAP_THRESHOLD < 8 * 2**20 and grown < 2**20
+    else:
+        assert grown > 4 * 2**20  # most of the 8 MB (the heap's free top holds the rest)
+
+
+def test_the_runner_pins_the_threshold_before_its_units(monkeypatch):
+    calls = []
+    monkeypatch.setattr(runner, "pin_mmap_threshold", lambda: calls.append(1))
+    run_scenario(scenarios.get("static-34n"), methods=["coarse"], runs=2, seed=1, quick=True, batch_size=1,
+                 progress=False)
+    assert len(calls) == 2  # once a unit (each is idempotent): a worker's first unit is pinned like the main's

@@ -1,5 +1,6 @@
-"""The Monte Carlo's memory: how many runs a batch holds (:func:`default_batch_size`), and the C heap a unit of work
-freed handed back to the system before the next (:func:`release_freed_heap`)."""
+"""The Monte Carlo's memory: how many runs a batch holds (:func:`default_batch_size`), the C heap a unit of work
+freed handed back to the system before the next (:func:`release_freed_heap`), and large arrays kept out of that heap
+(:func:`pin_mmap_threshold`)."""
 
 from __future__ import annotations
 
@@ -47,28 +48,63 @@ def default_batch_size(runs, n_samples, streamed, n_jobs):
     return -(-runs // batches)
 
 
-_trim = None  # glibc's malloc_trim once looked up (False: none here)
+_libc = None  # glibc once looked up (False: none here)
 
 
-def _malloc_trim():
-    """glibc's ``malloc_trim`` (size_t -> int), or None where there is none (macOS, musl, Windows)."""
-    global _trim
-    if _trim is None:
-        _trim = False
+def _glibc():
+    """glibc as a ctypes library, or None where there is none (macOS, musl, Windows, a Python without ctypes)."""
+    global _libc
+    if _libc is None:
+        _libc = False
         if sys.platform.startswith("linux"):
             try:
                 import ctypes
                 for name in ("libc.so.6", None):  # glibc by its soname; else the symbols the process has
                     try:
-                        trim = ctypes.CDLL(name).malloc_trim
+                        lib = ctypes.CDLL(name)
+                        lib.malloc_trim.argtypes, lib.malloc_trim.restype = [ctypes.c_size_t], ctypes.c_int
+                        lib.mallopt.argtypes, lib.mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
                     except (OSError, AttributeError, TypeError):
                         continue
-                    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
-                    _trim = trim
+                    _libc = lib
                     break
-            except ImportError:  # a Python built without ctypes
+            except ImportError:
                 pass
-    return _trim or None
+    return _libc or None
+
+
+def _malloc_trim():
+    """glibc's ``malloc_trim`` (size_t -> int), or None where there is none."""
+    lib = _glibc()
+    return None if lib is None else lib.malloc_trim
+
+
+#: Size from which glibc's malloc maps each block apart and unmaps it when it is freed, bytes (:func:`pin_mmap_threshold`).
+MMAP_THRESHOLD = 4 * 2**20
+_M_MMAP_THRESHOLD = -3  # mallopt's parameter (malloc.h)
+_pinned = False
+
+
+def pin_mmap_threshold() -> bool:
+    """Fix glibc's mmap threshold at :data:`MMAP_THRESHOLD` in this process (once; a no-op elsewhere).
+
+    glibc maps a block above its threshold apart, and unmaps it when it is freed; but each such block freed raises the
+    threshold to its own size, up to 32 MiB. After one batch's arrays (18 MB a run-axis array of 13 runs x 600 s at
+    100 Hz) are freed, the next ones of that size come from the heap, where the pages of a freed array between live
+    blocks stay in the process. A worker of ``run all`` that had run paper004's streams peaked at 611 MB on 13 runs of
+    static-q-jump, 481 MB fresh; with the threshold fixed at 4 MiB, 518 and 466 MB, in the same time
+    (benchmarks/README.md). The runner calls this before each unit of work.
+
+    Returns
+    -------
+    bool
+        Whether the threshold is fixed (False where there is no glibc).
+    """
+    global _pinned
+    if not _pinned:
+        lib = _glibc()
+        _pinned = lib is not None and lib.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
+    return _pinned
 
 
 def release_freed_heap() -> bool:

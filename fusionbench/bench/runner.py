@@ -15,7 +15,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from fusionbench.bench import streaming
-from fusionbench.bench.memory import default_batch_size, release_freed_heap
+from fusionbench.bench.memory import default_batch_size, pin_mmap_threshold, release_freed_heap
 from fusionbench.bench.run_metrics import run_metrics
 from fusionbench.files.progress import bar as progress_bar
 from fusionbench.methods.aligner import call_align, check_time_rule
@@ -131,6 +131,7 @@ def _run_units(scn, method_names, first_run, runs, seed, duration, refusals=Fals
     A record of at least :data:`fusionbench.bench.streaming.STREAM_MIN_S` goes as a stream of chunks to the methods that
     take one; the others share one simulation of the whole batch. With ``refusals`` a method that refuses the data
     (ValueError) gets its message instead of an outcome."""
+    pin_mmap_threshold()  # large arrays mapped apart, in a worker as here: freed, they leave the process
     whole = None
     for name in method_names:
         if duration >= streaming.STREAM_MIN_S and streaming.takes_chunks(scn.method(name)):
