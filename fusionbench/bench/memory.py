@@ -79,7 +79,8 @@ def _malloc_trim():
     return None if lib is None else lib.malloc_trim
 
 
-#: Size from which glibc's malloc maps each block apart and unmaps it when it is freed, bytes (:func:`pin_mmap_threshold`).
+#: Size from which glibc's malloc maps each block apart and unmaps it when it is freed, bytes
+#: (:func:`pin_mmap_threshold`).
 MMAP_THRESHOLD = 4 * 2**20
 _M_MMAP_THRESHOLD = -3  # mallopt's parameter (malloc.h)
 _pinned = False
@@ -91,8 +92,8 @@ def pin_mmap_threshold() -> bool:
     glibc maps a block above its threshold apart, and unmaps it when it is freed; but each such block freed raises the
     threshold to its own size, up to 32 MiB. After one batch's arrays (18 MB a run-axis array of 13 runs x 600 s at
     100 Hz) are freed, the next ones of that size come from the heap, where the pages of a freed array between live
-    blocks stay in the process. A worker of ``run all`` that had run paper004's streams peaked at 611 MB on 13 runs of
-    static-q-jump, 481 MB fresh; with the threshold fixed at 4 MiB, 518 and 466 MB, in the same time
+    blocks stay in the process. A process that had run paper004's streams peaked at 611 MB on 13 runs of static-q-jump,
+    481 MB fresh; with the threshold fixed at 4 MiB, 518 and 466 MB, in the same time
     (benchmarks/README.md). The runner calls this before each unit of work.
 
     Returns
