@@ -92,9 +92,9 @@ def pin_mmap_threshold() -> bool:
     glibc maps a block above its threshold apart, and unmaps it when it is freed; but each such block freed raises the
     threshold to its own size, up to 32 MiB. After one batch's arrays (18 MB a run-axis array of 13 runs x 600 s at
     100 Hz) are freed, the next ones of that size come from the heap, where the pages of a freed array between live
-    blocks stay in the process. A process that had run paper004's streams peaked at 611 MB on 13 runs of static-q-jump,
-    481 MB fresh; with the threshold fixed at 4 MiB, 518 and 466 MB, in the same time
-    (benchmarks/README.md). The runner calls this before each unit of work.
+    blocks stay in the process. A process that had run paper004-accel-0.005 peaked at 541 MB on 13 runs of
+    static-q-jump, 480 MB fresh; with the threshold fixed at 4 MiB, 528 and 474 MB, in the same time
+    (benchmarks/perf_heap.py). The runner calls this before each unit of work.
 
     Returns
     -------
