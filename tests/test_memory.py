@@ -82,7 +82,9 @@ print(libc.sbrk(0) - before)
 """
 
 
-@pytest.mark.skipif(not memory.trims_heap(), reason="the mmap threshold is glibc's (Linux with glibc)")
+@pytest.mark.skipif(not memory.trims_heap(),
+                    reason="the mmap threshold is glibc's (mallopt, Linux with glibc); elsewhere pin_mmap_threshold "
+                           "does nothing and has nothing to test")
 @pytest.mark.parametrize("mode", ["dynamic", "pinned"])
 def test_a_large_block_is_mapped_apart_even_after_a_larger_one_was_freed(mode):
     # glibc's own rule raises the threshold to the 20 MB freed, so the 8 MB come from the heap (the break moves by
