@@ -4,8 +4,10 @@ import ctypes
 import os
 import subprocess
 import sys
+import time
 
 import joblib
+import numba
 import pytest
 
 from fusionbench.bench import memory, runner, scenarios
@@ -103,3 +105,46 @@ def test_the_runner_pins_the_threshold_before_its_units(monkeypatch):
     run_scenario(scenarios.get("static-34n"), methods=["coarse"], runs=2, seed=1, quick=True, batch_size=1,
                  progress=False)
     assert len(calls) == 2  # once a unit (each is idempotent): a worker's first unit is pinned like the main's
+
+
+@numba.njit(cache=True)
+def _tiny_kernel(x):
+    return x + 1.0
+
+
+def _pid(compile_kernel):
+    """This worker's pid, after compiling (or loading) a kernel into numba's cache folder if asked; a task long enough
+    that each of two workers gets some of four."""
+    if compile_kernel:
+        _tiny_kernel(0.0)
+    time.sleep(0.3)
+    return os.getpid()
+
+
+def _worker_pids(compile_kernel=False):
+    return set(joblib.Parallel(n_jobs=2)(joblib.delayed(_pid)(compile_kernel) for _ in range(4)))
+
+
+def test_workers_that_compiled_a_kernel_are_restarted_and_the_others_kept(tmp_path, monkeypatch):
+    """A block in which a worker compiled a kernel (numba's cache folder grew) ends with new workers; a block in which
+    none did keeps them, and so does one of a single process."""
+    memory.restart_workers()  # workers started from here on see the test's cache folder
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    try:
+        with memory.fresh_workers_after_compiling(2):
+            first = _worker_pids()
+        assert len(first) == 2 and memory.compiled_kernel_files() == 0
+        with memory.fresh_workers_after_compiling(2):
+            assert _worker_pids(compile_kernel=True) == first  # the same workers did the compiling ...
+        assert memory.compiled_kernel_files() > 0, "the workers should have cached the kernel in the test's folder"
+        after = _worker_pids()
+        assert len(after) == 2 and not after & first  # ... and have been replaced
+        with memory.fresh_workers_after_compiling(2):  # loaded from the cache this time: nothing compiled
+            assert _worker_pids(compile_kernel=True) == after
+        assert _worker_pids() == after
+        files = memory.compiled_kernel_files()
+        with memory.fresh_workers_after_compiling(1):
+            (tmp_path / "numba" / "new.nbi").write_bytes(b"")  # compiled in this process: no workers to restart
+        assert memory.compiled_kernel_files() == files + 1 and _worker_pids() == after
+    finally:
+        memory.restart_workers()  # the next tests' workers use the user's cache folder again

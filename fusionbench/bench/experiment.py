@@ -21,6 +21,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from fusionbench.bench.memory import fresh_workers_after_compiling
 from fusionbench.files import reportdir
 from fusionbench.files.pages import write_page
 
@@ -150,8 +151,9 @@ def run_scenario(scn, methods=None, runs=None, seed=0, quick=False, n_jobs=1, pr
     """
     exp = scn.experiment_type
     options = {"batch_size": batch_size} if batch_size is not None else {}
-    return exp.run(scn, methods=methods, runs=runs, seed=seed, quick=quick, n_jobs=n_jobs, progress=progress,
-                   refusals=refusals, **options)
+    with fresh_workers_after_compiling(n_jobs):  # what the compiler held stays out of the next scenario's workers
+        return exp.run(scn, methods=methods, runs=runs, seed=seed, quick=quick, n_jobs=n_jobs, progress=progress,
+                       refusals=refusals, **options)
 
 
 def write_scenario_report(out, folder):

@@ -1,12 +1,17 @@
 """The Monte Carlo's memory: how many runs a batch holds (:func:`default_batch_size`), the C heap a unit of work
-freed handed back to the system before the next (:func:`release_freed_heap`), and large arrays kept out of that heap
-(:func:`pin_mmap_threshold`)."""
+freed handed back to the system before the next (:func:`release_freed_heap`), large arrays kept out of that heap
+(:func:`pin_mmap_threshold`), and the compiler's memory kept out of the workers that go on to the next scenario
+(:func:`fresh_workers_after_compiling`)."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import sys
 
 import joblib
+
+import fusionbench
 
 from fusionbench.bench import streaming
 
@@ -127,3 +132,44 @@ def release_freed_heap() -> bool:
 def trims_heap() -> bool:
     """Whether :func:`release_freed_heap` can return memory here (glibc's ``malloc_trim`` found)."""
     return _malloc_trim() is not None
+
+
+def compiled_kernel_files() -> int:
+    """The number of files in numba's cache folder for these sources (:func:`fusionbench.numba_cache_dir`); it grows
+    when a process compiles a kernel that was not there.
+
+    Returns
+    -------
+    int
+        Files in the folder and its sub-folders (0 when there is no folder).
+    """
+    return sum(len(files) for _, _, files in os.walk(fusionbench.numba_cache_dir()))
+
+
+def restart_workers():
+    """Let joblib's local workers (loky's reusable executor) finish and exit; the next ``Parallel`` call starts new
+    ones. A Dask cluster's workers are not touched."""
+    from joblib.externals.loky import get_reusable_executor
+
+    get_reusable_executor().shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def fresh_workers_after_compiling(n_jobs):
+    """Within the block, work on ``n_jobs`` workers; if numba compiled a kernel meanwhile (its cache folder grew), the
+    local workers are restarted when the block ends.
+
+    Compiling leaves LLVM's memory in the process that compiled, and a worker goes on from scenario to scenario: on a
+    first `fusionbench run all` with numba's cache empty a worker grew to 818 MB, against 573 MB with the kernels
+    cached (benchmarks/README.md, "The workers' memory between scenarios"). New workers load the kernels from the
+    cache, which costs a few seconds once, after the scenarios that compiled.
+
+    Parameters
+    ----------
+    n_jobs : int
+        The block's workers (joblib's count); with 1 the work runs in this process and nothing is restarted.
+    """
+    before = compiled_kernel_files()
+    yield
+    if n_jobs != 1 and compiled_kernel_files() != before:
+        restart_workers()
