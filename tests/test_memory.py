@@ -77,7 +77,9 @@ if sys.argv[1] == "pinned":
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
 libc.free.argtypes, libc.sbrk.restype, libc.sbrk.argtypes = [ctypes.c_void_p], ctypes.c_void_p, [ctypes.c_long]
+libc.malloc_trim.argtypes = [ctypes.c_size_t]
 libc.free(libc.malloc(20 * 2**20))
+libc.malloc_trim(0)  # no free space left at the heap's top from the imports: a block from the heap must move the break
 before = libc.sbrk(0)
 block = libc.malloc(8 * 2**20)
 print(libc.sbrk(0) - before)
