@@ -112,6 +112,37 @@ def test_information_grows_along_the_scheme(m_paper):
     assert ro.information_rank(m_half) < 45  # measured 34 (tolerance dependent, see module notes)
 
 
+def test_sensitivity_takes_whole_exponentials_once_a_coefficient_row_is_not_zero(monkeypatch):
+    # the filter's model has zero coefficient rows in F_k and the sensitivity keeps only F_k's eta rows; a model whose
+    # rows turn non-zero at step 10 must give H_k Phi(t_k, 0) from the whole F_k, the steps before it included
+    scheme = Scheme(((SOUTH, RATE, 20.0), (EAST, RATE, 20.0)))
+    C0, coeffs = angles.angles_to_dcm([0.1, 0.02, -0.3]), model.coeff_vector(True, D0_X=1.0, G_XY=30.0)
+    steps = []
+
+    def drifting(x, w_cmd, lat, h=0.0):
+        F, H = error_jacobians(x, w_cmd, lat, h)
+        steps.append(None)
+        if len(steps) > 10:
+            F = F.copy()
+            F[0, model.N_COEFFS + 2] = 1e-2  # a coefficient that moves with the azimuth error
+        return F, H
+
+    monkeypatch.setattr(ro, "error_jacobians", drifting)
+    t, S = ro._output_sensitivity(scheme, LAT, 0.0, C0, coeffs, 1.0)
+    steps.clear()
+    ang = angles.dcm_to_angles(commanded_path(scheme, C0, np.arange(41.0)))
+    cmd = commands(scheme, C0, LAT)
+    FH = [drifting(np.concatenate([coeffs, ang[k]]), cmd[min(k, 39)], LAT) for k in range(41)]
+    P, want = np.eye(45), []
+    for k in range(40):
+        P = expm(FH[k][0]) @ P
+        want.append(FH[k + 1][1] @ P)
+    assert np.array_equal(t, np.arange(1.0, 41.0))
+    assert np.abs(S[:10] - want[:10]).max() <= 1e-12 * np.abs(want[:10]).max()
+    assert np.abs(S - want).max() <= 1e-9 * np.abs(want).max()
+    assert np.abs(S[-1, :, 0]).max() > 1e-6 * np.abs(S[-1]).max()  # the coefficient row reaches the outputs
+
+
 def test_matches_the_plain_definition_with_full_45x45_exponentials():
     # independent computation of M = sum Phi(t_k,0)^T H_k^T R^-1 H_k Phi(t_k,0) with expm of the full F_k,
     # at non-zero nominal coefficients (the drift Jacobian then varies with the attitude)
