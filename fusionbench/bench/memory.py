@@ -159,10 +159,10 @@ def fresh_workers_after_compiling(n_jobs):
     """Within the block, work on ``n_jobs`` workers; if numba compiled a kernel meanwhile (its cache folder grew), the
     local workers are restarted when the block ends.
 
-    Compiling leaves LLVM's memory in the process that compiled, and a worker goes on from scenario to scenario: on a
-    first `fusionbench run all` with numba's cache empty a worker grew to 818 MB, against 573 MB with the kernels
-    cached (benchmarks/README.md, "The workers' memory between scenarios"). New workers load the kernels from the
-    cache, which costs a few seconds once, after the scenarios that compiled.
+    Compiling leaves LLVM's memory in the process that compiled, and a worker goes on from scenario to scenario. New
+    workers load the kernels from the cache; that costs a few seconds after each scenario that compiled, and nothing
+    once the cache is full. On a first `fusionbench run all --quick` with the cache empty the largest process went
+    from 708 to 530 MB (benchmarks/README.md, "A first run, with numba's cache empty").
 
     Parameters
     ----------
