@@ -67,22 +67,20 @@ def test_all_cores_means_the_cores_this_process_may_use(monkeypatch):
                                                                                              allowed - 1)
 
 
-# a block of 20 MB freed, then one of 8 MB: where does the second come from? The program break (the heap's end) moves
-# when it comes from the heap; a mapped block leaves it where it was
-_BREAK_PROBE = """
+# a block of 20 MB freed, then one of 8 MB: is the second mapped apart? glibc marks a chunk it mapped by itself with
+# the IS_MMAPPED bit (2) of the size word just before the block; a chunk of the heap has it clear, wherever the heap's
+# top was and whether the heap grew by the break or by a mapping of its own
+_MAPPED_PROBE = """
 import ctypes, sys
 from fusionbench.bench import memory
 if sys.argv[1] == "pinned":
     assert memory.pin_mmap_threshold()
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
-libc.free.argtypes, libc.sbrk.restype, libc.sbrk.argtypes = [ctypes.c_void_p], ctypes.c_void_p, [ctypes.c_long]
-libc.malloc_trim.argtypes = [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
 libc.free(libc.malloc(20 * 2**20))
-libc.malloc_trim(0)  # no free space left at the heap's top from the imports: a block from the heap must move the break
-before = libc.sbrk(0)
 block = libc.malloc(8 * 2**20)
-print(libc.sbrk(0) - before)
+print(ctypes.c_size_t.from_address(block - ctypes.sizeof(ctypes.c_size_t)).value & 2)
 """
 
 
@@ -91,14 +89,12 @@ print(libc.sbrk(0) - before)
                            "does nothing and has nothing to test")
 @pytest.mark.parametrize("mode", ["dynamic", "pinned"])
 def test_a_large_block_is_mapped_apart_even_after_a_larger_one_was_freed(mode):
-    # glibc's own rule raises the threshold to the 20 MB freed, so the 8 MB come from the heap (the break moves by
-    # most of them); pinned at 4 MiB they are mapped apart and go back to the system when freed
-    out = subprocess.run([sys.executable, "-c", _BREAK_PROBE, mode], capture_output=True, text=True, check=True)
-    grown = int(out.stdout)
-    if mode == "pinned":
-        assert memory.MMAP_THRESHOLD < 8 * 2**20 and grown < 2**20
-    else:
-        assert grown > 4 * 2**20  # most of the 8 MB (the heap's free top holds the rest)
+    # glibc's own rule raises the threshold to the 20 MB freed, so the 8 MB come from the heap; pinned at 4 MiB they
+    # are mapped apart and go back to the system when freed
+    out = subprocess.run([sys.executable, "-c", _MAPPED_PROBE, mode], capture_output=True, text=True, check=True)
+    mapped = int(out.stdout) == 2
+    assert memory.MMAP_THRESHOLD < 8 * 2**20
+    assert mapped == (mode == "pinned")
 
 
 def test_the_runner_pins_the_threshold_before_its_units(monkeypatch):
