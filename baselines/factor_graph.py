@@ -38,6 +38,19 @@ from .graph_support import _interval_rotations, _propagate, keyframe_counts
 __all__ = ["FactorGraphAligner", "RobustFactorGraphAligner", "noise_model"]
 
 
+def _check_turn_per_interval(name, dth, counts, t_kf):
+    """Refuse, in one line, a record whose gyros turn by pi rad or more within one keyframe interval: the interval's
+    rotation vector, which the tangent preintegration accumulates, would wrap. ``dth`` (R, M, 3) rad, the sample
+    rotation vectors; ``counts`` (K,) the keyframe sample counts; ``t_kf`` (K,) their times, s. The sum of the samples'
+    angles bounds the interval's rotation from above, so a record this accepts never wraps."""
+    turned = np.add.reduceat(np.linalg.norm(dth, axis=-1), counts[:-1], axis=1)  # (R, K - 1) rad
+    r, k = np.unravel_index(np.argmax(turned), turned.shape)
+    if turned[r, k] >= np.pi:
+        raise ValueError(f"{name}: the gyros turn by {np.degrees(turned[r, k]):.0f} deg within the keyframe interval "
+                         f"from t = {t_kf[k]:.2f} s to {t_kf[k + 1]:.2f} s (run {r}): expected less than 180 deg, "
+                         f"where the interval's rotation vector wraps; give a shorter keyframe interval (step_s)")
+
+
 class FactorGraphAligner(GraphSolver, AlignerBase):
     """Factor-graph fine alignment (method ``gtsam``): gtsam ImuFactors with earth-rate Coriolis,
     velocity factors from every reference sample and a bias with zero-mean priors, solved by
@@ -236,7 +249,9 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         ValueError
             Naming the field: beside the input policy of :class:`fusionbench.methods.aligner_base.AlignerBase` (latitude
             beyond 89 deg, a record shorter than ``min_duration_s``, aiding outside the record, a bad ``init``,
-            non-finite samples), a keyframe interval shorter than the sample interval.
+            non-finite samples), a keyframe interval shorter than the sample interval, a record that turns by half a
+            turn or more within one keyframe interval (the interval's rotation vector would wrap: give a shorter
+            ``step_s``).
         """
         if self.step_s < imu.dt:
             raise ValueError(f"{self.name}: step_s: expected a keyframe interval of at least the sample interval "
@@ -247,6 +262,7 @@ class FactorGraphAligner(GraphSolver, AlignerBase):
         counts = keyframe_counts(M, max(1, int(round(self.step_s / dt))))
         K = counts.size
         t_kf = np.concatenate([[imu.t0], t_end[counts[1:] - 1]])
+        _check_turn_per_interval(self.name, dth, counts, t_kf)
         T = np.diff(counts) * dt
         seg, walk = self._bias_segments(t_kf)
         warm = self._warm_runs(imu)  # a prefix of the record a prefix aligner solved: start from its solution

@@ -111,7 +111,8 @@ def interval_rates(phi, counts, dt):
     -------
     ndarray, shape (M, 3)
         ``phi / dt`` for samples outside ``[counts[0], counts[-1])``. An interval that turns by more than pi
-        wraps the logarithm, as the NumPy loops did (a keyframe interval of 1 s would have to turn at 180 deg/s).
+        wraps the logarithm, as the NumPy loops did (a keyframe interval of 1 s would have to turn at 180 deg/s);
+        the aligner refuses such a record before it gets here.
     """
     phi = np.ascontiguousarray(phi, dtype=float)
     rates = phi / dt

@@ -2,6 +2,7 @@
 calibrated marginals on noisy data, the command line and refused inputs."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -266,6 +267,28 @@ def test_absurd_inputs_are_refused_naming_the_field():
         fg.align(data, Site(LAT), init=np.zeros((3, 3)))
     with pytest.raises(ValueError, match="step_s"):
         FactorGraphAligner(step_s=0.0)
+
+
+@pytest.mark.parametrize("turn_deg, refused", [(181.0, True), (179.0, False)])
+def test_half_a_turn_within_one_keyframe_interval_is_refused_in_one_line(turn_deg, refused):
+    # a level base whose heading sways at 0.5 Hz from one extreme to the other within each 1-s keyframe interval
+    # (extremes at whole seconds): each interval turns by twice the amplitude, and at half a turn its rotation
+    # vector would pass pi and wrap
+    sway = tj.EulerSway(mean=(0.0, 0.0, -30 * D), amplitude=(0.0, 0.0, turn_deg / 2 * D), frequency=(0.0, 0.0, 0.5),
+                        phase=(0.0, 0.0, np.pi / 2))
+    tr = tj.Trajectory(LAT, 0.3, 50.0, sway, duration=20.0)
+    data, site, init = simulate(tr, IMUSpec(), 0.01), Site(LAT, 0.3, 50.0), tr.truth([0.0]).C_bn[0]
+    if refused:
+        with pytest.raises(ValueError) as err:
+            FactorGraphAligner(imu=BIASED).align(data, site, init=init)
+        msg = str(err.value)
+        assert "\n" not in msg and "step_s" in msg
+        t0, t1 = map(float, re.search(r"from t = ([\d.]+) s to ([\d.]+) s \(run 0\)", msg).groups())
+        assert t1 - t0 == pytest.approx(1.0) and t0 == round(t0) and f"turn by {turn_deg:.0f} deg" in msg
+        # the remedy it names: at 0.5-s keyframes each interval turns by less
+        assert FactorGraphAligner(imu=BIASED, step_s=0.5).align(data, site, init=init).C_bn.shape[0] == 1
+    else:
+        assert FactorGraphAligner(imu=BIASED).align(data, site, init=init).C_bn.shape[0] == 1
 
 
 def test_a_spec_whose_accelerometer_bias_walks_and_gyro_bias_does_not_still_moves_the_graph():
