@@ -72,8 +72,8 @@ def test_all_cores_means_the_cores_this_process_may_use(monkeypatch):
 # top was and whether the heap grew by the break or by a mapping of its own
 _MAPPED_PROBE = """
 import ctypes, sys
-from fusionbench.bench import memory
-if sys.argv[1] == "pinned":
+if sys.argv[1] == "pinned":  # glibc's own rule is probed in a process that imports nothing else
+    from fusionbench.bench import memory
     assert memory.pin_mmap_threshold()
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
