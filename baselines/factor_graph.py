@@ -43,7 +43,8 @@ def _check_turn_per_interval(name, dth, counts, t_kf):
     rotation vector, which the tangent preintegration accumulates, would wrap. ``dth`` (R, M, 3) rad, the sample
     rotation vectors; ``counts`` (K,) the keyframe sample counts; ``t_kf`` (K,) their times, s. The sum of the samples'
     angles bounds the interval's rotation from above, so a record this accepts never wraps."""
-    turned = np.add.reduceat(np.linalg.norm(dth, axis=-1), counts[:-1], axis=1)  # (R, K - 1) rad
+    angles = np.sqrt(np.einsum("rmi,rmi->rm", dth, dth))  # (R, M) rad, without an (R, M, 3) temporary
+    turned = np.add.reduceat(angles, counts[:-1], axis=1)  # (R, K - 1) rad
     r, k = np.unravel_index(np.argmax(turned), turned.shape)
     if turned[r, k] >= np.pi:
         raise ValueError(f"{name}: the gyros turn by {np.degrees(turned[r, k]):.0f} deg within the keyframe interval "
