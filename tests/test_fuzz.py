@@ -5,7 +5,6 @@ value per history or one line naming the argument (issue 24)."""
 
 import io
 import os
-import tempfile
 import zipfile
 
 import numpy as np
@@ -20,11 +19,16 @@ from fusionbench.scoring import metrics
 #: Examples per property (FUZZ_EXAMPLES=2000 for a deeper search than the suite's).
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
 SETTINGS = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-_DIR = tempfile.mkdtemp(prefix="fusionbench-fuzz-")
 
 
-def _read(name, payload):
-    path = os.path.join(_DIR, name)
+@pytest.fixture(scope="module")
+def fuzz_dir(tmp_path_factory):
+    """A folder for the files the properties write (pytest's, so that it is removed with its other folders)."""
+    return tmp_path_factory.mktemp("fuzz")
+
+
+def _read(folder, name, payload):
+    path = os.path.join(folder, name)
     with open(path, "wb") as fh:
         fh.write(payload)
     try:
@@ -45,16 +49,16 @@ _cell = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-1
 @SETTINGS
 @given(st.lists(st.lists(_cell, min_size=0, max_size=8), min_size=0, max_size=12),
        st.sampled_from(["t,gx,gy,gz,ax,ay,az", "t,gx,gy,gz,ax,ay", "", "time,a,b"]))
-def test_any_csv_is_read_or_refused_in_one_line(rows, header):
+def test_any_csv_is_read_or_refused_in_one_line(fuzz_dir, rows, header):
     text = header + "\n" + "\n".join(",".join(str(c) for c in r) for r in rows) + "\n"
-    _read("fuzz.csv", text.encode())
+    _read(fuzz_dir, "fuzz.csv", text.encode())
 
 
 @SETTINGS
 @given(st.binary(max_size=300))
-def test_any_bytes_as_any_format_are_read_or_refused_in_one_line(payload):
+def test_any_bytes_as_any_format_are_read_or_refused_in_one_line(fuzz_dir, payload):
     for name in ("fuzz.csv", "fuzz.imu", "fuzz.npz"):
-        _read(name, payload)
+        _read(fuzz_dir, name, payload)
 
 
 _arrays = st.one_of(
@@ -67,25 +71,25 @@ _arrays = st.one_of(
 
 @SETTINGS
 @given(st.dictionaries(st.sampled_from(["t", "gyro", "accel", "x"]), _arrays, max_size=4))
-def test_any_npz_arrays_are_read_or_refused_in_one_line(arrays):
+def test_any_npz_arrays_are_read_or_refused_in_one_line(fuzz_dir, arrays):
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    _read("fuzz.npz", buf.getvalue())
+    _read(fuzz_dir, "fuzz.npz", buf.getvalue())
 
 
 @SETTINGS
 @given(st.lists(st.lists(st.one_of(st.integers(-10**20, 10**20), st.floats(), st.text("0123456789.-e", max_size=6)),
                          min_size=0, max_size=7), min_size=0, max_size=8))
-def test_any_psins_text_is_read_or_refused_in_one_line(rows):
+def test_any_psins_text_is_read_or_refused_in_one_line(fuzz_dir, rows):
     head = "0 0 0 0 0 0\n34 108 100 0 10 9.78\n0.01 0.01 0.01 10 10 10\n"
-    _read("fuzz.imu", (head + "\n".join(" ".join(str(c) for c in r) for r in rows) + "\n").encode())
+    _read(fuzz_dir, "fuzz.imu", (head + "\n".join(" ".join(str(c) for c in r) for r in rows) + "\n").encode())
 
 
-def test_a_zip_that_is_not_an_npz_is_refused():
+def test_a_zip_that_is_not_an_npz_is_refused(tmp_path):
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as z:
         z.writestr("t.npy", b"not an array")
-    assert _read("zip.npz", buf.getvalue()) is None
+    assert _read(tmp_path, "zip.npz", buf.getvalue()) is None
 
 
 _values = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(),
