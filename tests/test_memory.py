@@ -146,3 +146,74 @@ def test_workers_that_compiled_a_kernel_are_restarted_and_the_others_kept(tmp_pa
         assert memory.compiled_kernel_files() == files + 1 and _worker_pids() == after
     finally:
         memory.restart_workers()  # the next tests' workers use the user's cache folder again
+
+
+def _task(k, compile_kernel):
+    """``(k, this worker's pid)`` after compiling (or loading) the tiny kernel if asked."""
+    return k, _pid(compile_kernel)
+
+
+def test_tasks_that_compile_go_first_and_the_workers_are_restarted_after_them(tmp_path, monkeypatch):
+    """The first tasks, one a worker, run apart; when they compiled (the cache folder grew) the next tasks run on new
+    workers, and once a group compiled nothing the rest run on the same workers. The results come in order."""
+    memory.restart_workers()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    try:
+        jobs = [joblib.delayed(_task)(k, k < 2) for k in range(8)]  # the first two compile, the others do not
+        out = list(memory.parallel_compiling_first(jobs, 2))
+        assert [k for k, _ in out] == list(range(8))
+        first, second, rest = ({pid for _, pid in out[a:b]} for a, b in ((0, 2), (2, 4), (4, 8)))
+        assert memory.compiled_kernel_files() > 0
+        assert not first & (second | rest)  # restarted after the group that compiled ...
+        assert len(second | rest) <= 2  # ... not after the one that did not (two workers throughout)
+        again = list(memory.parallel_compiling_first([joblib.delayed(_task)(k, True) for k in range(6)], 2))
+        assert [k for k, _ in again] == list(range(6))
+        assert {pid for _, pid in again} <= second | rest  # the kernel loaded from the cache: nobody restarted
+        assert [k for k, _ in memory.parallel_compiling_first(jobs[:3], 1)] == [0, 1, 2]  # one process
+        assert {pid for _, pid in memory.parallel_compiling_first(jobs[:3], 1)} == {os.getpid()}
+    finally:
+        memory.restart_workers()
+
+
+def _cache_file(k, folder):
+    """Task ``k``: a new file in the cache folder (what a compile leaves), then ``k``."""
+    (folder / f"{k}.nbi").write_bytes(b"")
+    return k
+
+
+def test_tasks_on_another_backend_run_as_one_list(tmp_path, monkeypatch):
+    """Under a backend other than loky's (threads here, a Dask cluster in use) nothing is restarted or grouped, even
+    while the cache folder grows."""
+    folder = tmp_path / "numba"
+    folder.mkdir()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(folder))
+    monkeypatch.setattr(memory, "restart_workers", lambda: pytest.fail("restarted under another backend"))
+    with joblib.parallel_config(backend="threading"):
+        out = list(memory.parallel_compiling_first([joblib.delayed(_cache_file)(k, folder) for k in range(5)], 2))
+    assert out == [0, 1, 2, 3, 4] and memory.compiled_kernel_files() == 5
+
+
+def _rehearse(k, folder):
+    """A rehearsal task: compiles the tiny kernel and leaves its pid in ``folder``."""
+    (folder / f"rehearsal-{k}-{_pid(True)}").write_bytes(b"")
+
+
+def test_a_rehearsal_compiles_on_an_empty_cache_in_workers_that_are_then_replaced(tmp_path, monkeypatch):
+    """On an empty cache folder the rehearsal runs first and its workers are restarted; the tasks that follow load
+    the kernel and run on the same new workers throughout. With kernels in the folder there is no rehearsal."""
+    memory.restart_workers()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    try:
+        rehearsal = [joblib.delayed(_rehearse)(k, marks) for k in range(2)]
+        out = list(memory.parallel_compiling_first([joblib.delayed(_task)(k, True) for k in range(6)], 2, rehearsal))
+        assert [k for k, _ in out] == list(range(6))
+        rehearsed = {int(p.name.split("-")[2]) for p in marks.iterdir()}
+        assert len(list(marks.iterdir())) == 2 and memory.compiled_kernel_files() > 0
+        assert not rehearsed & {pid for _, pid in out}  # restarted after the rehearsal ...
+        assert len({pid for _, pid in out}) <= 2  # ... not after the first group (two workers throughout)
+        list(memory.parallel_compiling_first([joblib.delayed(_task)(0, True)], 2, rehearsal))
+        assert len(list(marks.iterdir())) == 2  # the kernel cached: no rehearsal
+    finally:
+        memory.restart_workers()

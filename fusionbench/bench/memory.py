@@ -1,7 +1,7 @@
 """The Monte Carlo's memory: how many runs a batch holds (:func:`default_batch_size`), the C heap a unit of work
 freed handed back to the system before the next (:func:`release_freed_heap`), large arrays kept out of that heap
 (:func:`pin_mmap_threshold`), and the compiler's memory kept out of the workers that go on to the next scenario
-(:func:`fresh_workers_after_compiling`)."""
+(:func:`fresh_workers_after_compiling`) or to the next tasks of a long list (:func:`parallel_compiling_first`)."""
 
 from __future__ import annotations
 
@@ -173,3 +173,56 @@ def fresh_workers_after_compiling(n_jobs):
     yield
     if n_jobs != 1 and compiled_kernel_files() != before:
         restart_workers()
+
+
+def _local_workers():
+    """Whether joblib's active backend is loky's local workers (the ones :func:`restart_workers` restarts)."""
+    backend, _ = joblib.parallel.get_active_backend()
+    return type(backend).__name__ == "LokyBackend"
+
+
+def parallel_compiling_first(jobs, n_jobs, rehearsal=()):
+    """Run ``jobs`` (joblib's delayed calls) on ``n_jobs`` workers and yield their results in order, with the tasks
+    that compile kept apart from the others: on an empty cache folder the ``rehearsal`` first (smaller tasks that use
+    the same kernels, their results dropped), then the first tasks, one a worker, on their own; when numba compiled a
+    kernel meanwhile (its cache folder grew) the local workers are restarted before the next ones go, in the same way,
+    until a group compiles nothing; the rest then run as one list.
+
+    The first conditions of the conformance matrix compile every kernel its methods use (71 files in its cache folder,
+    on an empty cache); the two workers that compiled them went on through the matrix's 28 conditions at 630 to
+    680 MB, where workers that load the kernels stay near 420 MB (benchmarks/README.md, "A first run, with numba's
+    cache empty"). The compiling is then done on the rehearsal's small arrays, not on the first tasks' whole batches.
+    With the cache full only the first group is run apart, which costs the difference between its tasks' times. With
+    one worker, or a backend other than loky's (a Dask cluster), the jobs run as one list and there is no rehearsal.
+
+    Parameters
+    ----------
+    jobs : iterable of joblib.delayed calls
+        The tasks, in order.
+    n_jobs : int
+        Workers (joblib's count; -1: the cores).
+    rehearsal : iterable of joblib.delayed calls
+        Tasks run first, when no kernel of these sources is in the cache folder yet, to compile the kernels on small
+        data in workers that are then restarted.
+
+    Yields
+    ------
+    Each task's result, in the order of ``jobs``.
+    """
+    jobs = list(jobs)
+    width = joblib.effective_n_jobs(n_jobs)
+    start = 0
+    if width > 1 and _local_workers():
+        rehearsal = list(rehearsal)
+        if rehearsal and compiled_kernel_files() == 0:
+            joblib.Parallel(n_jobs=n_jobs)(rehearsal)
+            restart_workers()
+        while start < len(jobs):
+            before = compiled_kernel_files()
+            yield from joblib.Parallel(n_jobs=n_jobs, return_as="generator")(jobs[start:start + width])
+            start += width
+            if compiled_kernel_files() == before:
+                break
+            restart_workers()
+    if start < len(jobs):
+        yield from joblib.Parallel(n_jobs=n_jobs, return_as="generator")(jobs[start:])

@@ -35,10 +35,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from joblib import Parallel, delayed
+from joblib import delayed
 
 from fusionbench.bench.conformance_file import (Matrix, condition_bound,  # noqa: F401 (the experiment's)
                                                 condition_scenario, parse)
+from fusionbench.bench.memory import parallel_compiling_first
 from fusionbench.files.progress import bar as progress_bar
 from fusionbench.methods import aligner
 from fusionbench.methods.aligner import available_methods
@@ -110,9 +111,13 @@ def run_matrix(matrix, methods=None, runs=None, seed=0, quick=False, n_jobs=1, p
     # numbers as any other split, since run k of a seed does not depend on the batching. Each worker takes its
     # condition's bound and limits too, so that a moving base's (an ODE solve of the path) is taken once, in parallel
     jobs = (delayed(_run_condition)(matrix, cond, quick, duration, claimed, runs, seed) for cond, claimed, _ in todo)
+    # on an empty kernel cache the first conditions compile every kernel: on two runs (the batched kernels), in
+    # workers that are restarted before the matrix, so that the compiler's memory does not meet a whole batch's
+    rehearsal = (delayed(_run_condition)(matrix, cond, quick, duration, claimed, min(runs, 2), seed)
+                 for cond, claimed, _ in todo[:2])
     pbar = progress_bar(progress, runs * len(todo), matrix.name)
     results = []
-    for out in Parallel(n_jobs=n_jobs, return_as="generator")(jobs):  # conditions in order, as they finish
+    for out in parallel_compiling_first(jobs, n_jobs, rehearsal):  # conditions in order, as they finish
         results.append(out)
         pbar.update(runs)
     pbar.close()
