@@ -1,6 +1,7 @@
 """Monte Carlo on a Dask cluster (``run --scheduler`` / ``--cluster``): the numbers of ``--jobs 1``, bit for bit."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -40,7 +41,29 @@ def test_a_local_cluster_gives_the_numbers_of_jobs_1(tmp_path, serial):
     assert _numbers(tmp_path / "c") == serial
 
 
-def test_a_running_scheduler_with_two_workers_gives_the_numbers_of_jobs_1(tmp_path, serial):
+@pytest.fixture
+def environ_kept():
+    """This process's environment put back after the test: a LocalCluster's nannies set their workers' variables
+    (MALLOC_TRIM_THRESHOLD_, OMP_NUM_THREADS, ...) in the process that starts them, and the later tests' subprocesses
+    would inherit them."""
+    saved = dict(os.environ)
+    yield
+    os.environ.clear()
+    os.environ.update(saved)
+
+
+def test_a_local_cluster_leaves_this_process_environment_as_it_was():
+    from fusionbench.bench.cluster import connect
+
+    before = dict(os.environ)
+    with connect(cluster=1) as n_jobs:
+        inside = dict(os.environ)
+    assert n_jobs == 2
+    assert inside != before, "dask's nannies no longer set their workers' variables here: nothing to put back"
+    assert dict(os.environ) == before
+
+
+def test_a_running_scheduler_with_two_workers_gives_the_numbers_of_jobs_1(tmp_path, serial, environ_kept):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc:
         r = cli(*RUN, "--scheduler", lc.scheduler_address, "--out", tmp_path / "s")
     assert r.returncode == 0, r.stderr

@@ -13,6 +13,7 @@ fusionbench and library versions.
 from __future__ import annotations
 
 import contextlib
+import os
 import re
 
 __all__ = ["parse_cluster", "connect"]
@@ -63,6 +64,18 @@ def _probe(scheduler, timeout_s):
                          f"{exc.strerror or exc})") from None
 
 
+def _restore_environ(saved):
+    """Put this process's environment back to ``saved``. A ``LocalCluster``'s nannies set the variables meant for
+    their workers (dask's ``distributed.nanny.pre-spawn-environ``: ``MALLOC_TRIM_THRESHOLD_``, ``OMP_NUM_THREADS``
+    and others) in the process that starts them, where every process it starts later would inherit them (glibc's
+    malloc then keeps its mmap threshold fixed, numpy's BLAS runs on one thread)."""
+    for key in set(os.environ) - set(saved):
+        del os.environ[key]
+    for key, value in saved.items():
+        if os.environ.get(key) != value:
+            os.environ[key] = value
+
+
 @contextlib.contextmanager
 def connect(scheduler=None, cluster=None, timeout_s=10.0):
     """Within the block, joblib sends work to a Dask cluster; yields the number of worker threads (the runners'
@@ -74,7 +87,7 @@ def connect(scheduler=None, cluster=None, timeout_s=10.0):
         Address of a running ``dask scheduler`` (``tcp://host:8786``).
     cluster : int or None
         With ``scheduler`` None: a ``LocalCluster`` on this machine of this many single-threaded worker processes
-        (None: one per core).
+        (None: one per core); this process's environment is as it was when the block ends.
     timeout_s : float
         How long to wait for the scheduler, s.
 
@@ -95,6 +108,7 @@ def connect(scheduler=None, cluster=None, timeout_s=10.0):
                 raise ValueError(f"--scheduler {scheduler}: no Dask scheduler answered within {timeout_s:g} s "
                                  f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
         else:
+            stack.callback(_restore_environ, dict(os.environ))  # after the cluster has closed
             local = stack.enter_context(distributed.LocalCluster(n_workers=cluster, threads_per_worker=1,
                                                                  processes=True, dashboard_address=None))
             client = stack.enter_context(distributed.Client(local))
