@@ -190,8 +190,9 @@ def parallel_compiling_first(jobs, n_jobs, rehearsal=()):
 
     The first conditions of the conformance matrix compile every kernel its methods use (71 files in its cache folder,
     on an empty cache); the two workers that compiled them went on through the matrix's 28 conditions at 630 to
-    680 MB, where workers that load the kernels stay near 420 MB (benchmarks/README.md, "A first run, with numba's
-    cache empty"). The compiling is then done on the rehearsal's small arrays, not on the first tasks' whole batches.
+    680 MB, where workers that load the kernels stay near 420 MB; with the rehearsal the largest process of that first
+    run went from 659 to 484 MB (benchmarks/README.md, "The conformance matrix compiles apart"): the compiling is done
+    on the rehearsal's small arrays, not on the first tasks' whole batches.
     With the cache full only the first group is run apart, which costs the difference between its tasks' times. With
     one worker, or a backend other than loky's (a Dask cluster), the jobs run as one list and there is no rehearsal.
 
