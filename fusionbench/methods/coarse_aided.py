@@ -39,7 +39,7 @@ the same times (it is known at the increment ends; a row between two is weighted
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -274,11 +274,6 @@ class ImuAtRows:
     C: np.ndarray | None
     C_pos: np.ndarray | None
     w: np.ndarray | None
-
-    def runs(self, part: slice) -> ImuAtRows:
-        """What the IMU gives at the rows for the recordings ``part`` (a slice of the R)."""
-        return ImuAtRows(**{f.name: None if getattr(self, f.name) is None else getattr(self, f.name)[part]
-                            for f in fields(self)})  # every field has the runs first
 
 
 def imu_at_rows(pl, V_out, P_out, vkeep, C_out, ckeep, dth, dt, lever) -> ImuAtRows:

@@ -95,8 +95,8 @@ def inertial_coarse(imu, site, aiding, history_points: int = 100, fit_points: in
         level_rows = None
     else:
         C_b0_i0, resid, excess, v, T, track = _aided_fit_by_runs(
-            rows, pl, imu_at_rows(pl, V_out, P_out, vkeep, C_out, ckeep, dth, imu.dt, lever), site, t, imu.t0,
-            fit_points, who)
+            rows, pl, lambda part: imu_at_rows(pl, V_out[part], P_out[part], vkeep, C_out[part], ckeep, dth[part],
+                                               imu.dt, lever), site, t, imu.t0, fit_points, who)
         lat_k, dlon_k = (np.stack([np.interp(t[keep], T, x[r]) for r in range(R)]) for x in track[:2])
         C_n_i0 = c_n_i0(tk, site.lat, lat_k, dlon_k)
         level_rows = (rows.tau, v)
@@ -114,11 +114,12 @@ def inertial_coarse(imu, site, aiding, history_points: int = 100, fit_points: in
 
 def _aided_fit_by_runs(rows, pl, imu_rows, site, t, t0, fit_points, who):
     """:func:`fusionbench.methods.coarse_aided.aided_fit` a few recordings at a time (each recording's fit is its own):
-    the same outputs, the runs joined."""
+    the same outputs, the runs joined. ``imu_rows(part)``: the :class:`~fusionbench.methods.coarse_aided.ImuAtRows`
+    of the recordings ``part`` (a slice), formed a part at a time like the fit."""
     R, grid = rows.v.shape[0], rows.tau.size + pl.bridge.size + pl.kp.size
     step = max(1, CHUNK_SAMPLES // max(grid, 1))
-    parts = [aided_fit(rows.runs(slice(r, r + step)), pl, imu_rows.runs(slice(r, r + step)), site, t, t0, fit_points,
-                       who) for r in range(0, R, step)]
+    parts = [aided_fit(rows.runs(slice(r, r + step)), pl, imu_rows(slice(r, r + step)), site, t, t0, fit_points, who)
+             for r in range(0, R, step)]
     if len(parts) == 1:
         return parts[0]
     C_b0_i0, resid, excess, v = (np.concatenate([p[i] for p in parts]) for i in range(4))
