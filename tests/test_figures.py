@@ -167,3 +167,25 @@ def test_many_methods_are_spread_over_panels():
     assert [len(g) for g in fg.groups([f"m{i}" for i in range(10)])] == [5, 5]
     assert [len(g) for g in fg.groups([f"m{i}" for i in range(7)])] == [4, 3]
     assert fg.groups(["a", "b"]) == [["a", "b"]]
+
+
+def test_the_band_is_numpys_nan_aware_percentiles_at_every_time():
+    # spread() sends the times without a NaN to np.percentile at once and the others to np.nanpercentile: each time's
+    # band must be the 16th and 84th percentiles of the runs it has, a time where no run has a value staying NaN.
+    # Independent computation: the percentiles of each time's finite values, by the definition (linear between the
+    # order statistics, numpy's default)
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=(7, 400)) * 10.0 ** rng.uniform(-6, 3, size=400)
+    values[rng.random(values.shape) < 0.04] = np.nan
+    values[:, 5] = np.nan
+    lo, hi = fg.spread(values)
+    assert np.isnan(values).any(axis=0).sum() > 20 and np.isnan(lo[5]) and np.isnan(hi[5])
+    for m in range(values.shape[1]):
+        x = np.sort(values[:, m][np.isfinite(values[:, m])])
+        for q, got in zip(fg.BAND_PERCENTILES, (lo[m], hi[m])):
+            if x.size == 0:
+                continue
+            pos = q / 100.0 * (x.size - 1)
+            i = int(np.floor(pos))
+            want = x[i] + (pos - i) * (x[min(i + 1, x.size - 1)] - x[i])
+            assert got == pytest.approx(want, rel=1e-12, abs=1e-300)

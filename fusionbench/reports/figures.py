@@ -109,10 +109,16 @@ def spread(values):
     values = np.asarray(values, dtype=float)
     if values.shape[0] < 2 or values.shape[1] == 0:
         return values[0], values[0]
-    with warnings.catch_warnings():  # a time where every run is NaN (not drawn) stays NaN
-        warnings.simplefilter("ignore", RuntimeWarning)
-        lo, hi = np.nanpercentile(values, BAND_PERCENTILES, axis=0)
-    return lo, hi
+    # np.nanpercentile takes the times one at a time (24 000 of them, 1.2 s, in one report): the times without a
+    # NaN go to np.percentile at once, the same interpolation on the same values
+    gaps = np.isnan(values).any(axis=0)
+    out = np.empty((len(BAND_PERCENTILES), values.shape[1]))
+    out[:, ~gaps] = np.percentile(values[:, ~gaps], BAND_PERCENTILES, axis=0)
+    if gaps.any():
+        with warnings.catch_warnings():  # a time where every run is NaN (not drawn) stays NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out[:, gaps] = np.nanpercentile(values[:, gaps], BAND_PERCENTILES, axis=0)
+    return out[0], out[1]
 
 
 def median_band(ax, t, values, color, label, band=True, **kw):
